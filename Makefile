@@ -1,0 +1,23 @@
+# Everything runs inside the project's virtual environment .venv.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+
+.PHONY: install run test bench clean
+
+install:  ## create .venv and install the project with its test extras
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --upgrade pip
+	$(PY) -m pip install -e ".[test]"
+
+run:  ## the main job on the built-in default case
+	$(PY) -m jaxgrid.powerflow --case ieee39 --out results/ieee39_powerflow.json
+
+test:  ## the test suite (2 simulated CPU devices, see tests/conftest.py)
+	$(PY) -m pytest -q
+
+bench:  ## benchmarks; figures go to bench_results/*.json
+	$(PY) -m experiments.bench_powerflow --out bench_results/powerflow.json
+
+clean:
+	rm -rf $(VENV) results bench_results .pytest_cache

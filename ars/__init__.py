@@ -1,0 +1,1 @@
+"""ars: Parallel Augmented Random Search (PARS) for functional JAX environments."""

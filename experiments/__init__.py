@@ -1,0 +1,1 @@
+"""Command-line experiments and benchmarks (python -m experiments.<name>)."""

@@ -1,0 +1,1 @@
+"""Readers for PSS/E RAW and DYR files and MATPOWER case data."""

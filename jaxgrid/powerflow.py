@@ -1,0 +1,377 @@
+"""AC power flow: full Newton-Raphson in polar form, in JAX, float64.
+
+The unknowns are every bus's angle and magnitude (2 n_bus). Each bus contributes
+a P row and a Q row; a row whose quantity is not specified is replaced by the
+set-point equation (slack: `va = va_set`; PV and slack: `vm = vm_set`;
+isolated buses are pinned), so the Jacobian has one static shape. PV-to-PQ
+switching on reactive limits then changes only boolean masks (data), and the
+whole Newton loop (`lax.while_loop`, dense LU solve) is compiled once per case
+size. Jacobian: the analytic polar derivatives of S = V conj(Y V) (as in
+MATPOWER's dSbus_dV), plus the voltage dependence of ZIP loads.
+
+Conventions (see `jaxgrid.case`): p.u. on the system base, angles in radians.
+Loads are P + jQ = S_power + S_current |V| + S_impedance |V|^2.
+
+CLI:  python -m jaxgrid.powerflow (--raw FILE | --case NAME) [--flat] [--no-q-limits] [--out pf.json]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrid.case import ISOLATED, PQ, PV, SLACK, Case
+
+
+class PowerFlowError(RuntimeError):
+    """The Newton iteration did not converge; says where the mismatch is largest."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PowerFlowOptions:
+    """Power-flow settings.
+
+    Attributes:
+      tol: convergence tolerance on the largest P/Q mismatch, p.u. (1e-8 p.u. = 1 W at 100 MVA).
+      max_iter: Newton iterations per solve.
+      flat_start: start from vm = 1 (set points at PV/slack), va = slack angle,
+        instead of the voltages stored in the case.
+      enforce_q_limits: switch PV buses whose generators leave [Qmin, Qmax] to PQ
+        with Q at the limit, and back to PV when the voltage returns to the
+        set-point side of the limit; solve again until no bus changes (as PSS/E).
+      max_switch_rounds: solves allowed for PV-to-PQ switching.
+    """
+
+    tol: float = 1e-8
+    max_iter: int = 30
+    flat_start: bool = False
+    enforce_q_limits: bool = True
+    max_switch_rounds: int = 20
+
+
+@dataclasses.dataclass(frozen=True)
+class PowerFlowResult:
+    """A solved operating point.
+
+    Attributes:
+      case: the case that was solved.
+      vm: (n_bus,) voltage magnitude, p.u. (0 at isolated buses).
+      va: (n_bus,) voltage angle, radians (0 at isolated buses).
+      pg, qg: (n_gen,) generator output, p.u. system base (0 when out of service).
+      bus_kind: (n_bus,) bus types after PV-to-PQ switching.
+      switched_to_pq: external numbers of PV buses held at a reactive limit.
+      iterations: Newton iterations, summed over switching rounds.
+      max_mismatch: largest P/Q mismatch at the solution, p.u.
+      converged: True (a failed solve raises PowerFlowError instead).
+    """
+
+    case: Case
+    vm: np.ndarray
+    va: np.ndarray
+    pg: np.ndarray
+    qg: np.ndarray
+    bus_kind: np.ndarray
+    switched_to_pq: tuple[int, ...]
+    iterations: int
+    max_mismatch: float
+    converged: bool = True
+
+    def to_json(self) -> dict:
+        """The CLI's JSON: buses in the file's order (three-winding star buses left out)."""
+        keep = self.case.buses.number > 0
+        return {
+            "bus_ids": self.case.buses.number[keep].tolist(),
+            "vm": self.vm[keep].tolist(),
+            "va_deg": np.degrees(self.va[keep]).tolist(),
+            "converged": self.converged,
+            "iterations": self.iterations,
+            "max_mismatch_pu": self.max_mismatch,
+        }
+
+
+# --------------------------------------------------------------------------- #
+# Host-side assembly (NumPy, float64)
+# --------------------------------------------------------------------------- #
+
+def active_branches(case: Case) -> np.ndarray:
+    """(n_branch,) bool: in service and not touching an isolated bus."""
+    br, kind = case.branches, case.buses.kind
+    return br.in_service & (kind[br.from_bus] != ISOLATED) & (kind[br.to_bus] != ISOLATED)
+
+
+def admittance_matrix(case: Case) -> np.ndarray:
+    """Dense bus admittance matrix (n_bus, n_bus), complex128, p.u.
+
+    Branches as pi models with the ratio tap * exp(j shift) on the from side,
+    bus-side branch-end shunts, and in-service shunts. Loads are not included.
+    """
+    br = case.branches
+    on = active_branches(case)
+    ys = 1.0 / (br.r + 1j * br.x)
+    ratio = br.tap * np.exp(1j * br.shift)
+    y_ff = (ys + 0.5j * br.b) / np.abs(ratio) ** 2 + br.g_from + 1j * br.b_from
+    y_tt = ys + 0.5j * br.b + br.g_to + 1j * br.b_to
+    y_ft = -ys / np.conj(ratio)
+    y_tf = -ys / ratio
+    n = case.n_bus
+    ybus = np.zeros((n, n), dtype=np.complex128)
+    f, t = br.from_bus[on], br.to_bus[on]
+    np.add.at(ybus, (f, f), y_ff[on])
+    np.add.at(ybus, (t, t), y_tt[on])
+    np.add.at(ybus, (f, t), y_ft[on])
+    np.add.at(ybus, (t, f), y_tf[on])
+    sh = case.shunts
+    np.add.at(ybus, (sh.bus[sh.in_service], sh.bus[sh.in_service]),
+              (sh.g + 1j * sh.b)[sh.in_service])
+    return ybus
+
+
+def bus_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-bus ZIP load at 1 p.u.: (S_power, S_current, S_impedance), each (n_bus,) complex."""
+    ld, n = case.loads, case.n_bus
+    on = ld.in_service
+
+    def total(p, q):
+        out = np.zeros(n, dtype=np.complex128)
+        np.add.at(out, ld.bus[on], (p + 1j * q)[on])
+        return out
+
+    return (total(ld.p_power, ld.q_power), total(ld.p_current, ld.q_current),
+            total(ld.p_impedance, ld.q_impedance))
+
+
+def _bus_sum(case: Case, values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    out = np.zeros(case.n_bus)
+    np.add.at(out, case.generators.bus[mask], values[mask])
+    return out
+
+
+# --------------------------------------------------------------------------- #
+# Newton iteration (JAX)
+# --------------------------------------------------------------------------- #
+
+def _residual_and_jacobian(va, vm, ybus, s_gen, s_load, p_row, q_row, va_set, vm_set):
+    """Stacked residual (2n,) and Jacobian (2n, 2n) of the masked power-flow equations."""
+    s_power, s_current, s_impedance = s_load
+    v = vm * jnp.exp(1j * va)
+    i_bus = ybus @ v
+    s_bus = v * jnp.conj(i_bus)
+    mismatch = s_bus - s_gen + s_power + s_current * vm + s_impedance * vm ** 2
+    unit = v / vm
+    ds_dva = 1j * v[:, None] * jnp.conj(jnp.diag(i_bus) - ybus * v[None, :])
+    ds_dvm = (v[:, None] * jnp.conj(ybus * unit[None, :])
+              + jnp.diag(jnp.conj(i_bus) * unit + s_current + 2 * s_impedance * vm))
+    n = vm.shape[0]
+    eye, zero = jnp.eye(n), jnp.zeros((n, n))
+    p_jac = jnp.where(p_row[:, None], jnp.concatenate([ds_dva.real, ds_dvm.real], 1),
+                      jnp.concatenate([eye, zero], 1))
+    q_jac = jnp.where(q_row[:, None], jnp.concatenate([ds_dva.imag, ds_dvm.imag], 1),
+                      jnp.concatenate([zero, eye], 1))
+    residual = jnp.concatenate([jnp.where(p_row, mismatch.real, va - va_set),
+                                jnp.where(q_row, mismatch.imag, vm - vm_set)])
+    return residual, jnp.concatenate([p_jac, q_jac], 0)
+
+
+@partial(jax.jit, static_argnames=("max_iter",))
+def newton(va, vm, ybus, s_gen, s_load, p_row, q_row, va_set, vm_set, tol, max_iter):
+    """Newton-Raphson until max |residual| < tol, max_iter, or a non-finite step.
+
+    Args: va, vm (n,) start point (rad, p.u.); ybus (n, n); s_gen (n,) specified
+    generation; s_load (3 x (n,)) ZIP load; p_row, q_row (n,) bool, True where
+    the P / Q balance is enforced; va_set, vm_set (n,) set points elsewhere.
+    Returns (va, vm, iterations, residual (2n,)) of the last finite iterate.
+    """
+    args = (ybus, s_gen, s_load, p_row, q_row, va_set, vm_set)
+
+    def cond(carry):
+        _, _, it, residual = carry
+        return (jnp.max(jnp.abs(residual)) > tol) & (it < max_iter)
+
+    def body(carry):
+        va, vm, it, residual = carry
+        _, jac = _residual_and_jacobian(va, vm, *args)
+        step = jnp.linalg.solve(jac, -residual)
+        n = va.shape[0]
+        va_new, vm_new = va + step[:n], vm + step[n:]
+        res_new, _ = _residual_and_jacobian(va_new, vm_new, *args)
+        finite = jnp.all(jnp.isfinite(res_new)) & jnp.all(vm_new > 0)
+        # A non-finite step ends the loop (it = max_iter) and keeps the last good iterate.
+        return (jnp.where(finite, va_new, va), jnp.where(finite, vm_new, vm),
+                jnp.where(finite, it + 1, max_iter), jnp.where(finite, res_new, residual))
+
+    residual, _ = _residual_and_jacobian(va, vm, *args)
+    return jax.lax.while_loop(cond, body, (va, vm, jnp.asarray(0), residual))
+
+
+# --------------------------------------------------------------------------- #
+# Driver (host): set points, start, PV-to-PQ switching, generator dispatch
+# --------------------------------------------------------------------------- #
+
+def _set_points(case: Case):
+    """Effective bus types, voltage set points and specified generation."""
+    gen, bus = case.generators, case.buses
+    on = gen.in_service & (bus.kind[gen.bus] != ISOLATED)
+    kind = bus.kind.copy()
+    has_gen = _bus_sum(case, np.ones(len(gen.bus)), on) > 0
+    kind[(kind == PV) & ~has_gen] = PQ  # PSS/E: a type-2 bus without a machine is type 1
+    vm_set = np.where(bus.vm > 0, bus.vm, 1.0)
+    for k in np.flatnonzero(on)[::-1]:  # first in-service machine's VS wins
+        vm_set[gen.bus[k]] = gen.vset[k]
+    s_gen = _bus_sum(case, gen.pg, on) + 1j * _bus_sum(case, gen.qg, on)
+    return kind, vm_set, s_gen, on
+
+
+def _dispatch(case: Case, s_gen_bus: np.ndarray, on: np.ndarray):
+    """Split each bus's generation over its in-service machines.
+
+    P: stored values, the slack bus's difference to its first machine.
+    Q: in proportion to each machine's reactive range (so all sit at a limit together).
+    """
+    gen = case.generators
+    pg = np.where(on, gen.pg, 0.0)
+    for b in np.flatnonzero(case.buses.kind == SLACK):
+        units = np.flatnonzero(on & (gen.bus == b))
+        if units.size:
+            pg[units[0]] += s_gen_bus[b].real - pg[units].sum()
+    qmax_bus, qmin_bus = _bus_sum(case, gen.qmax, on), _bus_sum(case, gen.qmin, on)
+    count = _bus_sum(case, np.ones(len(gen.bus)), on)
+    span = qmax_bus - qmin_bus
+    b = gen.bus
+    share = np.where(span[b] > 0,
+                     (s_gen_bus.imag[b] - qmin_bus[b]) / np.where(span[b] > 0, span[b], 1.0), 0.0)
+    qg = np.where(span[b] > 0, gen.qmin + share * (gen.qmax - gen.qmin),
+                  s_gen_bus.imag[b] / np.maximum(count[b], 1))
+    return pg, np.where(on, qg, 0.0)
+
+
+def solve(case: Case, options: PowerFlowOptions = PowerFlowOptions()) -> PowerFlowResult:
+    """Solve the AC power flow of `case`; raises PowerFlowError if it does not converge."""
+    kind, vm_set, s_gen, on = _set_points(case)
+    isolated = kind == ISOLATED
+    va_set = np.where(isolated, 0.0, case.buses.va)
+    vm_set = np.where(isolated, 1.0, vm_set)
+    if options.flat_start:
+        va0 = np.full(case.n_bus, case.buses.va[kind == SLACK][0])
+        vm0 = np.where(kind == PQ, 1.0, vm_set)
+    else:
+        va0, vm0 = va_set.copy(), np.where(kind == PQ, np.where(case.buses.vm > 0,
+                                                                  case.buses.vm, 1.0), vm_set)
+    s_load = bus_loads(case)
+    qmax = _bus_sum(case, case.generators.qmax, on)
+    qmin = _bus_sum(case, case.generators.qmin, on)
+    limited = np.zeros(case.n_bus, dtype=int)  # +1 held at Qmax, -1 at Qmin
+    iterations = 0
+    with jax.enable_x64(True):
+        ybus = jnp.asarray(admittance_matrix(case))
+        s_load_j = tuple(jnp.asarray(s) for s in s_load)
+        for _ in range(options.max_switch_rounds):
+            p_row = (kind == PQ) | (kind == PV)
+            q_row = kind == PQ
+            va, vm, it, residual = newton(
+                jnp.asarray(va0), jnp.asarray(vm0), ybus, jnp.asarray(s_gen), s_load_j,
+                jnp.asarray(p_row), jnp.asarray(q_row), jnp.asarray(va_set),
+                jnp.asarray(vm_set), options.tol, options.max_iter)
+            va, vm, residual = np.asarray(va), np.asarray(vm), np.asarray(residual)
+            iterations += int(it)
+            _raise_if_failed(case, residual, int(it), options)
+            v = vm * np.exp(1j * va)
+            s_load_v = s_load[0] + s_load[1] * vm + s_load[2] * vm ** 2
+            s_gen_bus = v * np.conj(np.asarray(ybus) @ v) + s_load_v
+            if not options.enforce_q_limits:
+                break
+            q = s_gen_bus.imag
+            hit_max = (kind == PV) & (q > qmax + options.tol)
+            hit_min = (kind == PV) & (q < qmin - options.tol)
+            release = ((limited > 0) & (vm > vm_set + options.tol)) | (
+                (limited < 0) & (vm < vm_set - options.tol))
+            if not (hit_max.any() or hit_min.any() or release.any()):
+                break
+            limited = np.where(hit_max, 1, np.where(hit_min, -1, np.where(release, 0, limited)))
+            kind = np.where(limited != 0, PQ, np.where(release, PV, kind))
+            s_gen = s_gen.real + 1j * np.where(limited > 0, qmax, np.where(
+                limited < 0, qmin, s_gen.imag))
+            va0, vm0 = va, vm
+        else:
+            raise PowerFlowError(f"{case.source}: PV-to-PQ switching did not settle in "
+                                 f"{options.max_switch_rounds} rounds")
+    pg, qg = _dispatch(case, s_gen_bus, on)
+    vm = np.where(isolated, 0.0, vm)
+    va = np.where(isolated, 0.0, va)
+    return PowerFlowResult(case=case, vm=vm, va=va, pg=pg, qg=qg, bus_kind=kind,
+                           switched_to_pq=tuple(case.buses.number[limited != 0].tolist()),
+                           iterations=iterations,
+                           max_mismatch=float(np.max(np.abs(residual))))
+
+
+def _raise_if_failed(case: Case, residual: np.ndarray, iterations: int,
+                     options: PowerFlowOptions) -> None:
+    worst = int(np.argmax(np.abs(residual)))
+    largest = float(np.abs(residual[worst]))
+    if largest <= options.tol:
+        return
+    n = case.n_bus
+    bus = case.buses.number[worst % n]
+    part = "P" if worst < n else "Q"
+    raise PowerFlowError(
+        f"{case.source}: power flow did not converge in {iterations} iterations: "
+        f"largest mismatch {largest:.3e} p.u. ({part}) at bus {bus}")
+
+
+# --------------------------------------------------------------------------- #
+# CLI
+# --------------------------------------------------------------------------- #
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m jaxgrid.powerflow", description=__doc__.split("\n")[0])
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--raw", help="PSS/E RAW file (v23, v30-v33)")
+    source.add_argument("--case", help="built-in case name (see jaxgrid.cases.names())")
+    parser.add_argument("--flat", action="store_true", help="flat start instead of stored voltages")
+    parser.add_argument("--no-q-limits", action="store_true", help="do not switch PV buses to PQ")
+    parser.add_argument("--tol", type=float, default=PowerFlowOptions.tol, help="mismatch tolerance, p.u.")
+    parser.add_argument("--out", help="write the solution as JSON here")
+    args = parser.parse_args(argv)
+
+    from jaxgrid import cases
+    from jaxgrid.case import CaseError
+    from jaxgrid.io.raw import read_raw
+
+    try:
+        case = read_raw(args.raw) if args.raw else cases.load(args.case)
+    except (CaseError, ValueError, OSError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    options = PowerFlowOptions(tol=args.tol, flat_start=args.flat,
+                               enforce_q_limits=not args.no_q_limits)
+    start = time.perf_counter()
+    try:
+        result = solve(case, options)
+    except PowerFlowError as error:
+        print(f"converged: False\n{error}", file=sys.stderr)
+        return 1
+    seconds = time.perf_counter() - start
+    live = result.vm > 0
+    print(f"case: {case.name} ({case.n_bus} buses)")
+    print(f"converged: {result.converged}")
+    print(f"iterations: {result.iterations}")
+    print(f"max mismatch: {result.max_mismatch:.3e} p.u.")
+    print(f"voltage: min {result.vm[live].min():.4f} p.u. at bus {case.buses.number[live][np.argmin(result.vm[live])]},"
+          f" max {result.vm[live].max():.4f} p.u. at bus {case.buses.number[live][np.argmax(result.vm[live])]}")
+    print(f"PV buses switched to PQ: {len(result.switched_to_pq)}")
+    print(f"wall time: {seconds:.3f} s (includes JIT compilation)")
+    if args.out:
+        with open(args.out, "w") as handle:
+            json.dump(result.to_json(), handle)
+        print(f"written: {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
