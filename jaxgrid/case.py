@@ -244,6 +244,8 @@ _INTERNAL_BUS_FIELDS = {
     Generators: ("bus", "reg_bus"),
     Branches: ("from_bus", "to_bus"),
 }
+_BUS_FIELD_LABELS = {"bus": "bus", "reg_bus": "regulated bus (IREG)", "from_bus": "from bus",
+                     "to_bus": "to bus"}
 
 
 def _table(cls, rows: list[dict[str, Any]]):
@@ -311,16 +313,14 @@ def build_case(
     def resolve(kind, rows, cls):
         resolved = []
         for row in rows:
-            row = dict(row)
             for field in _INTERNAL_BUS_FIELDS[cls]:
                 number = int(row[field])
                 if number not in index:
-                    label = field.replace("_", " ")
                     raise CaseError(
-                        f"{_describe(kind, row)}: {label} {number} does not exist",
-                        source, row["line"])
-                row[field] = index[number]
-            resolved.append(row)
+                        f"{_describe(kind, row)}: {_BUS_FIELD_LABELS[field]} {number} "
+                        "does not exist", source, row["line"])
+            resolved.append({**row, **{field: index[int(row[field])]
+                                       for field in _INTERNAL_BUS_FIELDS[cls]}})
         return _table(cls, resolved)
 
     case = Case(

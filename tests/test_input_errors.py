@@ -16,14 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import SHARED_CASES
 from jaxgrid.case import CaseError
 from jaxgrid.io.raw import RawWarning, parse_raw, read_raw
 from jaxgrid.powerflow import PowerFlowError, PowerFlowOptions, solve
 
-IEEE39 = (Path(__file__).resolve().parents[2] / "shared" / "cases" / "ieee39"
-          / "IEEE39bus_multiloads_xfmr4_smallX_v30.raw")
-
-needs_ieee39 = pytest.mark.skipif(not IEEE39.is_file(), reason=f"{IEEE39} not available")
+IEEE39 = SHARED_CASES / "ieee39" / "IEEE39bus_multiloads_xfmr4_smallX_v30.raw"
 
 
 # --------------------------------------------------------------------------- #
@@ -129,7 +127,6 @@ def two_bus(load_mw: float) -> str:
 # The unmodified 39-bus file (control for the edits below)
 # --------------------------------------------------------------------------- #
 
-@needs_ieee39
 def test_ieee39_unmodified_reads(tmp_path):
     """Control: the unedited 39-bus text, written to tmp_path, reads without error."""
     lines = ieee39_lines()
@@ -146,7 +143,6 @@ def test_ieee39_unmodified_reads(tmp_path):
 # 1. Truncated file
 # --------------------------------------------------------------------------- #
 
-@needs_ieee39
 def test_truncated_in_branch_section(tmp_path):
     """A file cut in the middle of the branch section: end of file in branch data."""
     lines = ieee39_lines()
@@ -162,7 +158,6 @@ def test_truncated_in_branch_section(tmp_path):
     assert excinfo.value.source == str(path) and excinfo.value.line == keep
 
 
-@needs_ieee39
 def test_truncated_inside_transformer_record(tmp_path):
     """A file cut inside a 4-line transformer record: end of file names that transformer."""
     lines = ieee39_lines()
@@ -176,7 +171,6 @@ def test_truncated_inside_transformer_record(tmp_path):
     assert str(excinfo.value) == expected
 
 
-@needs_ieee39
 def test_truncated_between_sections(tmp_path):
     """A file that stops after the branch section's '0' line: transformer data missing."""
     lines = ieee39_lines()
@@ -191,7 +185,6 @@ def test_truncated_between_sections(tmp_path):
 # 2. Non-numeric field
 # --------------------------------------------------------------------------- #
 
-@needs_ieee39
 def test_branch_reactance_not_a_number(tmp_path):
     """X of branch 1-2 replaced by 'abc': file, line, branch, field and text in the message."""
     lines = ieee39_lines()
@@ -205,7 +198,6 @@ def test_branch_reactance_not_a_number(tmp_path):
     assert excinfo.value.line == number == 88
 
 
-@needs_ieee39
 def test_load_power_not_a_number(tmp_path):
     """PL of the load at bus 3 replaced by 'abc': message names the load record and PL."""
     lines = ieee39_lines()
@@ -222,19 +214,33 @@ def test_load_power_not_a_number(tmp_path):
 # 3.-5. Case validation errors
 # --------------------------------------------------------------------------- #
 
-@needs_ieee39
-def test_branch_to_missing_bus(tmp_path):
-    """Branch 1-2 re-pointed to bus 99999: names the line, the branch and the missing bus."""
+def _missing_to_bus_error(tmp_path) -> tuple[str, Path, int]:
     lines = ieee39_lines()
     number = line_number(lines, r"\s*1,\s*2,'1 '")
     path = write(tmp_path, set_field(lines, number, 1, "  99999"), "missing_bus.raw")
     with pytest.raises(CaseError) as excinfo:
         read_quietly(path)
+    return str(excinfo.value), path, number
+
+
+def test_branch_to_missing_bus(tmp_path):
+    """Branch 1-2 re-pointed to bus 99999: names the line, the branch (external numbers) and
+    the missing bus."""
+    message, path, number = _missing_to_bus_error(tmp_path)
+    assert message == f"{path}:{number}: branch 1-99999 ckt '1': to bus 99999 does not exist"
+
+
+def test_branch_from_missing_bus(tmp_path):
+    """Branch 1-2 with its from-bus changed to 99999: 'from bus 99999 does not exist'."""
+    lines = ieee39_lines()
+    number = line_number(lines, r"\s*1,\s*2,'1 '")
+    path = write(tmp_path, set_field(lines, number, 0, "99999"), "missing_from.raw")
+    with pytest.raises(CaseError) as excinfo:
+        read_quietly(path)
     assert str(excinfo.value) == (
-        f"{path}:{number}: branch 1-99999 ckt '1': to bus 99999 does not exist")
+        f"{path}:{number}: branch 99999-2 ckt '1': from bus 99999 does not exist")
 
 
-@needs_ieee39
 def test_zero_impedance_branch(tmp_path):
     """Branch 1-2 with R = X = 0: names the line, the branch and X = 0."""
     lines = ieee39_lines()
@@ -248,7 +254,6 @@ def test_zero_impedance_branch(tmp_path):
     assert "zero or non-finite series impedance is not supported" in message
 
 
-@needs_ieee39
 def test_no_slack_bus(tmp_path):
     """The only type-3 bus (31) changed to type 2: 'no slack bus' with the file name."""
     lines = ieee39_lines()
