@@ -22,6 +22,7 @@ import json
 import sys
 import time
 from functools import partial
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -367,8 +368,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"PV buses switched to PQ: {len(result.switched_to_pq)}")
     print(f"wall time: {seconds:.3f} s (includes JIT compilation)")
     if args.out:
-        with open(args.out, "w") as handle:
-            json.dump(result.to_json(), handle)
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(result.to_json()))
         print(f"written: {args.out}")
     return 0
 

@@ -254,7 +254,7 @@ def test_v23_loads_come_from_bus_records(shared_cases):
 def test_cli_json(tmp_path, shared_cases):
     """python -m jaxgrid.powerflow --raw FILE --out pf.json: keys, RAW bus order, values."""
     raw = shared_cases / "ieee39/baseCases/IEEE39bus_multiloads_xfmr4_smallX_v30_allload_per90.raw"
-    out = tmp_path / "pf.json"
+    out = tmp_path / "new_folder" / "pf.json"
     assert main(["--raw", str(raw), "--out", str(out)]) == 0
     data = json.loads(out.read_text())
     assert set(data) == {"bus_ids", "vm", "va_deg", "converged", "iterations", "max_mismatch_pu"}
