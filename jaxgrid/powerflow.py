@@ -192,23 +192,25 @@ def newton(va, vm, ybus, s_gen, s_load, p_row, q_row, va_set, vm_set, tol, max_i
     args = (ybus, s_gen, s_load, p_row, q_row, va_set, vm_set)
 
     def cond(carry):
-        _, _, it, residual = carry
+        _, _, it, residual, _ = carry
         return (jnp.max(jnp.abs(residual)) > tol) & (it < max_iter)
 
     def body(carry):
-        va, vm, it, residual = carry
-        _, jac = _residual_and_jacobian(va, vm, *args)
+        va, vm, it, residual, jac = carry
         step = jnp.linalg.solve(jac, -residual)
         n = va.shape[0]
         va_new, vm_new = va + step[:n], vm + step[n:]
-        res_new, _ = _residual_and_jacobian(va_new, vm_new, *args)
+        res_new, jac_new = _residual_and_jacobian(va_new, vm_new, *args)
         finite = jnp.all(jnp.isfinite(res_new)) & jnp.all(vm_new > 0)
         # A non-finite step ends the loop (it = max_iter) and keeps the last good iterate.
-        return (jnp.where(finite, va_new, va), jnp.where(finite, vm_new, vm),
-                jnp.where(finite, it + 1, max_iter), jnp.where(finite, res_new, residual))
+        keep = lambda new, old: jnp.where(finite, new, old)  # noqa: E731
+        return (keep(va_new, va), keep(vm_new, vm), keep(it + 1, max_iter),
+                keep(res_new, residual), keep(jac_new, jac))
 
-    residual, _ = _residual_and_jacobian(va, vm, *args)
-    return jax.lax.while_loop(cond, body, (va, vm, jnp.asarray(0), residual))
+    residual, jac = _residual_and_jacobian(va, vm, *args)
+    va, vm, it, residual, _ = jax.lax.while_loop(
+        cond, body, (va, vm, jnp.asarray(0), residual, jac))
+    return va, vm, it, residual
 
 
 # --------------------------------------------------------------------------- #
@@ -269,8 +271,9 @@ def solve(case: Case, options: PowerFlowOptions = PowerFlowOptions()) -> PowerFl
     qmin = _bus_sum(case, case.generators.qmin, on)
     limited = np.zeros(case.n_bus, dtype=int)  # +1 held at Qmax, -1 at Qmin
     iterations = 0
+    ybus_host = admittance_matrix(case)
     with jax.enable_x64(True):
-        ybus = jnp.asarray(admittance_matrix(case))
+        ybus = jnp.asarray(ybus_host)
         s_load_j = tuple(jnp.asarray(s) for s in s_load)
         for _ in range(options.max_switch_rounds):
             p_row = (kind == PQ) | (kind == PV)
@@ -284,7 +287,7 @@ def solve(case: Case, options: PowerFlowOptions = PowerFlowOptions()) -> PowerFl
             _raise_if_failed(case, residual, int(it), options)
             v = vm * np.exp(1j * va)
             s_load_v = s_load[0] + s_load[1] * vm + s_load[2] * vm ** 2
-            s_gen_bus = v * np.conj(np.asarray(ybus) @ v) + s_load_v
+            s_gen_bus = v * np.conj(ybus_host @ v) + s_load_v
             if not options.enforce_q_limits:
                 break
             q = s_gen_bus.imag
