@@ -1,0 +1,81 @@
+"""Reference trajectories from ANDES (CURENT, PyPI `andes`) for the same case, fault and horizon.
+
+Used by the validation tests and by the simulation benchmark. ANDES reads the same PSS/E
+RAW and DYR files; its `Toggle` records are not part of PSS/E and must not be in the DYR.
+ANDES converts constant-power loads to constant impedance in time-domain simulation by
+default (`PQ.config.p2z = q2z = 1`), which matches `LoadSplit()`'s default.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import re
+import time
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class AndesRun:
+    """ANDES results. t (n_t,) s; vm, va (n_t, n_bus) p.u./rad for `bus_ids`; speed_dev,
+    angle (n_t, n_gen) p.u./rad for machines at `gen_bus`; wall time of TDS in s."""
+
+    t: np.ndarray
+    bus_ids: np.ndarray
+    vm: np.ndarray
+    va: np.ndarray
+    gen_bus: np.ndarray
+    speed_dev: np.ndarray
+    angle: np.ndarray
+    wall_s: float
+
+
+def run_andes(raw: str, dyr: str, t_end: float, fault_bus: int | None = None,
+              fault_start: float = 1.0, fault_duration: float = 0.1, fault_x: float = 1e-4,
+              tstep: float = 0.005) -> AndesRun:
+    """Time-domain simulation in ANDES (implicit trapezoid, fixed step `tstep`, s)."""
+    import andes
+
+    andes.config_logger(stream_level=logging.ERROR)
+    ss = andes.load(raw, addfile=dyr, setup=False, no_output=True, default_config=True)
+    if fault_bus is not None:
+        ss.add("Fault", {"bus": fault_bus, "tf": fault_start,
+                         "tc": fault_start + fault_duration, "xf": fault_x, "rf": 0.0})
+    ss.setup()
+    ss.PFlow.run()
+    ss.TDS.config.tf = t_end
+    ss.TDS.config.tstep = tstep
+    ss.TDS.config.fixt = 1
+    ss.TDS.config.no_tqdm = 1
+    start = time.perf_counter()
+    ss.TDS.run()
+    wall = time.perf_counter() - start
+    ts = ss.dae.ts
+    machines = [m for m in (ss.GENROU, ss.GENCLS) if m.n]
+    return AndesRun(
+        t=np.asarray(ts.t), bus_ids=np.asarray(ss.Bus.idx.v),
+        vm=np.asarray(ts.y[:, ss.Bus.v.a]), va=np.asarray(ts.y[:, ss.Bus.a.a]),
+        gen_bus=np.concatenate([np.asarray(m.bus.v) for m in machines]),
+        speed_dev=np.concatenate([ts.x[:, m.omega.a] for m in machines], axis=1) - 1.0,
+        angle=np.concatenate([ts.x[:, m.delta.a] for m in machines], axis=1),
+        wall_s=wall)
+
+
+def write_psse_dyr(source: str, target: str, drop_models: tuple[str, ...] = ()) -> str:
+    """Copy a DYR file without ANDES-only `Toggle` records and without `drop_models` records.
+
+    Records end at '/'; a record is dropped when its model name (quoted) is listed.
+    Returns `target`.
+    """
+    with open(source) as f:
+        records = f.read().split("/")
+    drop = {m.upper() for m in drop_models} | {"TOGGLE"}
+
+    def model(record: str) -> str:
+        quoted = re.search(r"'\s*([^'\s]+)\s*'", record)
+        return quoted.group(1).upper() if quoted else ""
+
+    keep = [r for r in records[:-1] if model(r) not in drop]
+    with open(target, "w") as f:
+        f.write("/".join(keep) + "/\n")
+    return target

@@ -1,0 +1,353 @@
+"""Compile a solved case and its DYR records into a `GridModel`.
+
+Host side, NumPy and float64: match dynamic records to generators, read and check their
+CONs, initialise every device from the power flow in the order machines -> exciters ->
+governors (spec §0), fold machines' Norton admittances and constant-admittance loads into
+the network matrix and invert it, then check that all derivatives vanish at t = 0.
+"""
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from collections import Counter
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrid import network
+from jaxgrid.case import ISOLATED, Case
+from jaxgrid.dynamics import derivatives
+from jaxgrid.grid import DeviceGroup, GridModel, GridState
+from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
+from jaxgrid.models.base import ExciterInputs, ModelError
+from jaxgrid.models.exciters import EXCITERS
+from jaxgrid.models.governors import GOVERNORS
+from jaxgrid.models.loads import LoadSplit, split_bus_loads
+from jaxgrid.models.machines import MACHINES
+from jaxgrid.powerflow import PowerFlowResult, admittance_matrix, bus_loads, solve
+
+SUPPORTED = tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS)
+
+# What replaces a model that is not supported, by kind (lenient mode).
+_FALLBACK = {
+    "stabilizer": "the exciter runs without a stabilizer signal",
+    "load": "the load stays a static ZIP load (CompileOptions.loads)",
+    "exciter": "the machine keeps its initial field voltage",
+    "governor": "the machine keeps its initial mechanical power",
+    "machine": "the generator becomes a constant-admittance negative load",
+}
+_KINDS = {
+    "stabilizer": {"IEEEST", "ST2CUT", "PSS1A", "PSS2A", "PSS2B", "PSS3B", "STAB1", "STAB2",
+                   "STAB3", "STAB4", "IEE2ST", "STBSVC"},
+    "load": {"CIM5BL", "CIM6BL", "CIMWBL", "CLODBL", "CMLDBLU1", "CMLDBLU2", "IEELBL",
+             "LDFRBL", "ACMTBLU1", "CMLDARU2", "CMLDOWU2", "CMLDZNU2"},
+    "exciter": {"ESAC1A", "ESAC2A", "ESAC3A", "ESAC4A", "ESAC5A", "ESAC6A", "ESAC8B", "ESDC2A",
+                "ESST1A", "ESST2A", "ESST4B", "EXAC1", "EXAC2", "EXAC3", "EXAC4", "EXPIC1",
+                "SCRX", "IEEET2", "IEEET3", "IEEET4", "IEEEX2", "IEEEX3", "IEEEX4", "EXBAS",
+                "EXELI", "EXNI", "REXS", "URST5T", "AC8B"},
+    "governor": {"GGOV1", "WSIEG1", "TGOV5", "HYGOV4", "IEEEG2", "IEEEG3", "GAST2A", "WEHGOV",
+                 "WSHYGP", "WPIDHY", "TGOV3", "PIDGOV", "DEGOV1", "HYGOVM", "WESGOV"},
+    "machine": {"GENTPJ", "GENTPF", "GENDCO", "CGEN1", "FRECHG", "CSVGN1", "REGCA1", "REGCB1"},
+}
+
+
+class ModelWarning(UserWarning):
+    """Unsupported dynamic models dropped in lenient mode."""
+
+
+class InitWarning(UserWarning):
+    """A device starts away from equilibrium or outside a limit."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CompileOptions:
+    """How a case becomes a `GridModel`.
+
+    Attributes:
+      strict: unsupported DYR models (or a generator without a machine model) raise a
+        DyrError listing all of them; otherwise they are dropped with one warning that
+        says what replaces each.
+      loads: ZIP split of static loads during dynamics (default: constant admittance).
+      load_buses: RAW bus numbers whose load can be changed (load shedding); None: every
+        bus with an in-service load.
+      precision: "float32" (default time loop) or "float64".
+      sweeps: fixed-point sweeps per network solution (>= 1).
+      init_tolerance: largest |derivative| at t = 0 accepted without an InitWarning.
+    """
+
+    strict: bool = True
+    loads: LoadSplit = LoadSplit()
+    load_buses: tuple[int, ...] | None = None
+    precision: str = "float32"
+    sweeps: int = 2
+    init_tolerance: float = 1e-5
+
+    def __post_init__(self):
+        if self.precision not in ("float32", "float64"):
+            raise ValueError(f"precision = {self.precision!r}: allowed 'float32' or 'float64'")
+        if not isinstance(self.sweeps, int) or self.sweeps < 1:
+            raise ValueError(f"sweeps = {self.sweeps!r}: must be an int >= 1")
+
+
+def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOptions(),
+                  pf: PowerFlowResult | None = None) -> GridModel:
+    """A GridModel for `case` at its power-flow point with the dynamic models of `dyr`.
+
+    Raises DyrError (unsupported models, strict) or ModelError (bad CONs, naming file,
+    line, device and field); warns InitWarning when a device does not start at rest.
+    """
+    pf = solve(case) if pf is None else pf
+    notes: list[str] = []
+    v0 = pf.vm * np.exp(1j * pf.va)
+    gen = case.generators
+    on = gen.in_service & (case.buses.kind[gen.bus] != ISOLATED)
+    keys = {(int(case.buses.number[gen.bus[k]]), gen.gen_id[k].strip().upper()): int(k)
+            for k in np.flatnonzero(on)}
+    records = _classify(dyr, keys, options.strict, notes)
+    groups = _machine_groups(case, records["machine"], keys, options.strict, notes)
+    order = np.array([u for _, units, _ in groups for u in units], dtype=int)
+    position = {int(g): k for k, g in enumerate(order)}
+
+    sbase = case.base_mva
+    ratio = np.where(gen.mbase[order] > 0, gen.mbase[order], sbase) / sbase
+    vt0 = v0[gen.bus[order]]
+    i0 = np.conj((pf.pg[order] + 1j * pf.qg[order]) / ratio / vt0)  # machine base
+    with jax.enable_x64(True):
+        machines, m_states, efd0, pm0, xadifd = [], [], [], [], []
+        for model, units, params in groups:
+            k = [position[u] for u in units]
+            params, x, efd, pm = model.init(_jnp(params), jnp.asarray(vt0[k]), jnp.asarray(i0[k]))
+            xadifd.append(np.asarray(model.field_current(params, x, jnp.asarray(i0[k]))))
+            machines.append(DeviceGroup(params=_np(params), model=model, machine=tuple(k),
+                                        labels=_labels(case, model.name, units)))
+            m_states.append(_np(x))
+            efd0.append(np.asarray(efd))
+            pm0.append(np.asarray(pm))
+        efd0, pm0, xadifd = (np.concatenate(a) for a in (efd0, pm0, xadifd))
+        exciters, e_states = _controller_groups(
+            case, records["exciter"], EXCITERS, keys, position,
+            lambda model, p, k: model.init(p, jnp.asarray(efd0[k]), ExciterInputs(
+                ec=jnp.abs(jnp.asarray(vt0[k])), vt=jnp.asarray(vt0[k]), it=jnp.asarray(i0[k]),
+                xadifd=jnp.asarray(xadifd[k]), dw=jnp.zeros(len(k)))))
+        governors, g_states = _controller_groups(
+            case, records["governor"], GOVERNORS, keys, position,
+            lambda model, p, k: model.init(p, jnp.asarray(pm0[k])))
+
+    z_source = np.concatenate([g.params["ra"] + 1j * g.params["xs"] for g in machines])
+    y_norton = ratio / z_source
+    s_load = _bus_load_at(case, pf)
+    y_z, s_i, s_p = split_bus_loads(s_load, v0, options.loads)
+    y = admittance_matrix(case)
+    y[np.diag_indices(case.n_bus)] += y_z + _unmodelled_admittance(case, pf, on, order, notes)
+    np.add.at(y, (gen.bus[order], gen.bus[order]), y_norton)
+    load_bus = _load_buses(case, s_load, options)
+    slot_bus = np.concatenate([gen.bus[order], load_bus]).astype(int)
+
+    model = GridModel(
+        machines=tuple(machines), exciters=exciters, governors=governors,
+        network=network.build(y, slot_bus, np.complex128),
+        z_source=z_source, y_norton=y_norton, mbase_ratio=ratio, efd0=efd0, pm0=pm0,
+        load_y=y_z[load_bus], load_s_i=s_i[load_bus], load_s_p=s_p[load_bus],
+        load_vm0=np.maximum(pf.vm[load_bus], 1e-6), v0=v0,
+        initial=GridState(machines=tuple(m_states), exciters=e_states, governors=g_states,
+                          v=v0[slot_bus]),
+        bus_numbers=tuple(int(b) for b in case.buses.number),
+        gen_bus=tuple(int(case.buses.number[gen.bus[g]]) for g in order),
+        gen_id=tuple(gen.gen_id[g].strip() for g in order),
+        slot_bus=tuple(int(b) for b in slot_bus), load_bus=tuple(int(b) for b in load_bus),
+        omega_b=float(2 * np.pi * case.frequency_hz), pq_break=options.loads.pq_break,
+        sweeps=options.sweeps if len(load_bus) else 1, precision="float64", notes=())
+    _check_initial_state(model, options.init_tolerance, notes)
+    return with_precision(dataclasses.replace(model, notes=tuple(notes)), options.precision)
+
+
+def with_precision(model: GridModel, precision: str) -> GridModel:
+    """The same model with its arrays cast to float32/complex64 or float64/complex128."""
+    real, cplx = (np.float64, np.complex128) if precision == "float64" else (np.float32,
+                                                                            np.complex64)
+
+    def cast(a):
+        a = np.asarray(a)
+        if np.iscomplexobj(a):
+            return a.astype(cplx)
+        return a.astype(real) if np.issubdtype(a.dtype, np.floating) else a
+
+    return dataclasses.replace(jax.tree.map(cast, model), precision=precision)
+
+
+# --------------------------------------------------------------------------- #
+# Records -> device groups
+# --------------------------------------------------------------------------- #
+
+def _key(record: DyrRecord) -> tuple[int, str]:
+    return record.bus, record.device_id.strip().upper()
+
+
+def _kind(name: str) -> str:
+    if name in MACHINES or name in _KINDS["machine"]:
+        return "machine"
+    if name in EXCITERS or name in _KINDS["exciter"]:
+        return "exciter"
+    if name in GOVERNORS or name in _KINDS["governor"]:
+        return "governor"
+    for kind in ("stabilizer", "load"):
+        if name in _KINDS[kind]:
+            return kind
+    return "other"
+
+
+def _classify(dyr: DyrData, keys: dict, strict: bool, notes: list[str]) -> dict[str, list]:
+    """Supported records by kind; unsupported ones raise (strict) or warn with their fallback."""
+    out: dict[str, list[DyrRecord]] = {"machine": [], "exciter": [], "governor": []}
+    unsupported: dict[str, list[DyrRecord]] = {}
+    for r in dyr.records:
+        kind = "load" if r.record_type == "USRLOD" else _kind(r.model)
+        if r.model not in SUPPORTED or kind == "load":
+            unsupported.setdefault(r.model, []).append(r)
+        elif _key(r) not in keys:
+            notes.append(f"{r.source}:{r.line}: {r.model} at bus {r.bus} id '{r.device_id}' "
+                         "has no in-service generator; ignored")
+        else:
+            out[kind].append(r)
+    if unsupported:
+        listing = "; ".join(
+            f"{m} x{len(rs)} (first at line {rs[0].line}): " + _FALLBACK.get(
+                "load" if rs[0].record_type == "USRLOD" else _kind(m), "dropped")
+            for m, rs in unsupported.items())
+        message = f"{dyr.source}: unsupported dynamic models: {listing}"
+        if strict:
+            raise DyrError(message.replace(": dropped", "") + " (CompileOptions(strict=False) "
+                           "drops them with the fallbacks listed)")
+        warnings.warn(message, ModelWarning, stacklevel=3)
+        notes.append(message)
+    for kind, rs in out.items():
+        seen = Counter(_key(r) for r in rs)
+        for r in rs:
+            if seen[_key(r)] > 1:
+                raise ModelError(f"{r.source}:{r.line}: bus {r.bus} id '{r.device_id}' has "
+                                 f"more than one {kind} model")
+    return out
+
+
+def _labels(case: Case, name: str, units) -> tuple[str, ...]:
+    gen = case.generators
+    return tuple(f"{name} at bus {case.buses.number[gen.bus[u]]} id '{gen.gen_id[u].strip()}'"
+                 for u in units)
+
+
+def _machine_groups(case, records, keys, strict, notes):
+    """[(model, generator indices, CON params with ra, xs, zx)] in MACHINES order."""
+    gen = case.generators
+    missing = sorted(set(keys.values()) - {keys[_key(r)] for r in records})
+    if missing:
+        names = ", ".join(f"bus {case.buses.number[gen.bus[u]]} id '{gen.gen_id[u].strip()}'"
+                          for u in missing[:10])
+        message = f"{len(missing)} in-service generator(s) without a machine model: {names}"
+        if strict:
+            raise ModelError(f"{case.source}: {message}")
+        notes.append(message + "; " + _FALLBACK["machine"])
+    groups = []
+    for name, model in MACHINES.items():
+        rs = [r for r in records if r.model == name]
+        if not rs:
+            continue
+        units = [keys[_key(r)] for r in rs]
+        p = model.read(rs)
+        p.update(ra=gen.zr[units], zx=gen.zx[units])
+        p["xs"] = np.asarray(model.source_reactance(p), dtype=float)
+        for r, zx, xs in zip(rs, p["zx"], p["xs"]):
+            if abs(zx - xs) > 1e-3:
+                notes.append(f"{r.source}:{r.line}: {name} at bus {r.bus}: ZSOURCE X = {zx:g} "
+                             f"differs from the model's {xs:g}; the model's value is used")
+        groups.append((model, units, model.prepare(p)))
+    if not groups:
+        raise ModelError(f"{case.source}: no machine has a supported dynamic model")
+    return groups
+
+
+def _controller_groups(case, records, registry, keys, position, init):
+    """Exciter or governor groups attached to modelled machines, with initial states."""
+    groups, states = [], []
+    for name, model in registry.items():
+        rs = [r for r in records if r.model == name and keys[_key(r)] in position]
+        if not rs:
+            continue
+        units = [keys[_key(r)] for r in rs]
+        k = [position[u] for u in units]
+        params, x = init(model, _jnp(model.prepare(model.read(rs))), k)
+        groups.append(DeviceGroup(params=_np(params), model=model, machine=tuple(k),
+                                  labels=_labels(case, name, units)))
+        states.append(_np(x))
+    return tuple(groups), tuple(states)
+
+
+# --------------------------------------------------------------------------- #
+# Loads and unmodelled generators
+# --------------------------------------------------------------------------- #
+
+def _bus_load_at(case: Case, pf: PowerFlowResult) -> np.ndarray:
+    """(n_bus,) complex load drawn at the power-flow voltages (the case's own ZIP data)."""
+    s_power, s_current, s_impedance = bus_loads(case)
+    return s_power + s_current * pf.vm + s_impedance * pf.vm ** 2
+
+
+def _unmodelled_admittance(case, pf, on, order, notes) -> np.ndarray:
+    """(n_bus,) admittance of generators without a machine model, as negative loads."""
+    gen = case.generators
+    rest = np.setdiff1d(np.flatnonzero(on), order)
+    s = np.zeros(case.n_bus, dtype=complex)
+    np.add.at(s, gen.bus[rest], pf.pg[rest] + 1j * pf.qg[rest])
+    return -np.conj(s) / np.maximum(pf.vm, 1e-6) ** 2
+
+
+def _load_buses(case: Case, s_load: np.ndarray, options: CompileOptions) -> np.ndarray:
+    """Bus indices that get a load slot."""
+    has_load = np.flatnonzero(np.abs(s_load) > 0)
+    if options.load_buses is None:
+        return has_load
+    chosen = case.bus_index(list(options.load_buses)) if options.load_buses else np.zeros(0, int)
+    no_load = [case.buses.number[b] for b in chosen if b not in set(has_load)]
+    if no_load:
+        raise ValueError(f"CompileOptions.load_buses: buses {no_load} carry no load")
+    if options.loads.has_injections:
+        chosen = has_load  # every ZIP load with I or P parts needs a slot
+    return np.asarray(sorted(set(chosen.tolist())), dtype=int)
+
+
+# --------------------------------------------------------------------------- #
+# Checks and conversions
+# --------------------------------------------------------------------------- #
+
+def _check_initial_state(model: GridModel, tolerance: float, notes: list[str]) -> None:
+    """Warn (and note) every device variable that is not at rest or starts outside a limit."""
+    with jax.enable_x64(True):
+        fault = network.fault_view(model.network, 0, 1.0)
+        scale = jnp.ones(len(model.load_bus))
+        (dm, de, dg), _, _ = derivatives(model, model.initial, fault, 0.0, scale)
+        problems = []
+        for groups, rates, states in ((model.machines, dm, model.initial.machines),
+                                      (model.exciters, de, model.initial.exciters),
+                                      (model.governors, dg, model.initial.governors)):
+            for g, dx, x in zip(groups, rates, states):
+                for name, rate in dx.items():
+                    rate = np.abs(np.asarray(rate))
+                    for u in np.flatnonzero(rate > tolerance):
+                        problems.append(f"{g.labels[u]}: d{name}/dt = {rate[u]:.3g} at t = 0")
+                for name, bad in g.model.init_violations(g.params, x).items():
+                    for u in np.flatnonzero(np.asarray(bad)):
+                        problems.append(f"{g.labels[u]}: initial {name} = "
+                                        f"{float(x[name][u]):.4g} is outside its limits")
+    if problems:
+        message = (f"{len(problems)} device variable(s) not at rest at t = 0: "
+                   + "; ".join(problems[:20]) + ("; ..." if len(problems) > 20 else ""))
+        warnings.warn(message, InitWarning, stacklevel=3)
+        notes.extend(problems)
+
+
+def _jnp(params: dict) -> dict:
+    return {k: jnp.asarray(v) for k, v in params.items()}
+
+
+def _np(tree: dict) -> dict:
+    return {k: np.asarray(v) for k, v in tree.items()}

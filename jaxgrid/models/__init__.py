@@ -1,0 +1,1 @@
+"""Dynamic device models, one family per module (machines, exciters, governors, loads)."""

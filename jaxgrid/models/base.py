@@ -1,0 +1,194 @@
+"""What every dynamic device model shares: its CON table, validation and limiter blocks.
+
+A model is a class with class-level structure (PSS/E name, CON order with units and
+allowed ranges, state names) and pure functions over parameter and state dicts whose
+arrays have one row per unit, so one family's equations are one vectorised expression
+whatever the number of units. Limiter conventions follow IEEE 421.5 as summarised in
+`shared/specs/machines-exciters-governors.md` §0.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import ClassVar, NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrid.io.dyr import DyrRecord
+
+INF = math.inf
+
+Array = jnp.ndarray
+Params = dict[str, Array]
+States = dict[str, Array]
+
+
+class ModelError(ValueError):
+    """Dynamic data that a model cannot use (names the file, line, device and field)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Con:
+    """One PSS/E CON: lower-case name, unit, meaning and allowed closed range [lo, hi].
+
+    `positive` excludes the lower bound 0 itself (time constants that divide).
+    """
+
+    name: str
+    unit: str
+    info: str
+    lo: float = -INF
+    hi: float = INF
+    positive: bool = False
+
+    def check(self, value: float) -> str | None:
+        """A reason why `value` is not allowed, or None."""
+        if not math.isfinite(value):
+            return "must be finite"
+        if self.positive and value <= 0:
+            return "must be > 0"
+        if not self.lo <= value <= self.hi:
+            return f"must lie in [{self.lo}, {self.hi}]"
+        return None
+
+
+def device_label(record: DyrRecord) -> str:
+    """'file:line: MODEL at bus B id I' for messages."""
+    return f"{record.source}:{record.line}: {record.model} at bus {record.bus} id '{record.device_id}'"
+
+
+class DeviceModel:
+    """Structure shared by machine, exciter and governor models.
+
+    Subclasses set `name`, `cons` (PSS/E CON order), `states` and `n_icons` (integer
+    values written before the CONs, e.g. IEEEG1's JBUS and M).
+    """
+
+    name: ClassVar[str]
+    cons: ClassVar[tuple[Con, ...]]
+    states: ClassVar[tuple[str, ...]]
+    n_icons: ClassVar[int] = 0
+
+    @classmethod
+    def read(cls, records: Sequence[DyrRecord]) -> dict[str, np.ndarray]:
+        """CON arrays (n_unit,) float64 from DYR records, range-checked."""
+        n = len(cls.cons) + cls.n_icons
+        values = np.zeros((len(records), len(cls.cons)))
+        for k, rec in enumerate(records):
+            if len(rec.cons) != n:
+                raise ModelError(f"{device_label(rec)}: expected {n} values, found {len(rec.cons)}")
+            icons = rec.cons[:cls.n_icons]
+            cls.check_icons(rec, icons)
+            for j, (con, value) in enumerate(zip(cls.cons, rec.cons[cls.n_icons:])):
+                reason = con.check(value)
+                if reason:
+                    raise ModelError(f"{device_label(rec)}: CON({j + 1}) {con.name.upper()} "
+                                     f"= {value:g} {con.unit}: {reason}")
+                values[k, j] = value
+        params = {con.name: values[:, j] for j, con in enumerate(cls.cons)}
+        for k, rec in enumerate(records):
+            reason = cls.check_combination({key: v[k] for key, v in params.items()})
+            if reason:
+                raise ModelError(f"{device_label(rec)}: {reason}")
+        return params
+
+    @classmethod
+    def check_icons(cls, record: DyrRecord, icons: Sequence[float]) -> None:
+        """Reject ICON values the model does not support (none by default)."""
+
+    @classmethod
+    def check_combination(cls, p: dict[str, float]) -> str | None:
+        """A reason why one unit's CONs contradict each other, or None."""
+        return None
+
+    @classmethod
+    def limits(cls, p: Params) -> dict[str, tuple[Array, Array]]:
+        """Non-windup state limits {state: (lo, hi)}, applied after every update."""
+        return {}
+
+    @classmethod
+    def init_violations(cls, p: Params, x: States) -> dict[str, Array]:
+        """Per variable, (n,) bool of units whose initial value lies outside its limits."""
+        tol = 1e-6  # initial values computed in float64 sit on a limit to round-off
+        return {name: (x[name] < lo - tol) | (x[name] > hi + tol)
+                for name, (lo, hi) in cls.limits(p).items()}
+
+
+# --------------------------------------------------------------------------- #
+# Transfer-function blocks (jnp, elementwise over units)
+# --------------------------------------------------------------------------- #
+
+def safe(t: Array) -> Array:
+    """A time constant usable as a divisor: 1 where t == 0 (the block is bypassed)."""
+    return jnp.where(t > 0, t, 1.0)
+
+
+def lag(x: Array, u: Array, t: Array) -> Array:
+    """d/dt of a first-order lag state x with input u and time constant t (s); 0 if t == 0."""
+    return jnp.where(t > 0, (u - x) / safe(t), 0.0)
+
+
+def freeze_at_limits(dx: Array, x: Array, lo: Array, hi: Array) -> Array:
+    """Non-windup rule: no derivative pushing a state already at a limit further out."""
+    return jnp.where(((x >= hi) & (dx > 0)) | ((x <= lo) & (dx < 0)), 0.0, dx)
+
+
+def lead_lag_output(x: Array, u: Array, t_lead: Array, t_lag: Array) -> Array:
+    """Output of (1 + s t_lead)/(1 + s t_lag) whose lag state is x; u itself if t_lag == 0."""
+    ratio = t_lead / safe(t_lag)
+    return jnp.where(t_lag > 0, ratio * u + (1.0 - ratio) * x, u)
+
+
+def quadratic_saturation(x: Array, a: Array, b: Array) -> Array:
+    """PSS/E quadratic saturation factor Se(x) = b (x − a)² / x for x > a, else 0."""
+    xs = jnp.where(x > a, x, a + 1.0)
+    return jnp.where(x > a, b * (xs - a) ** 2 / jnp.maximum(xs, 1e-6), 0.0)
+
+
+def quadratic_saturation_constants(x1, s1, x2, s2) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) of the quadratic curve through (x1, s1) and (x2, s2), arrays (n,).
+
+    S1 = S2 = 0, or a zero point x1 or x2 (how DC-exciter data say "no saturation data",
+    as ANDES also reads it), gives no saturation (B = 0); S1 = 0 < S2 gives A = x1.
+    Callers must first reject S2·x2 <= S1·x1 (see `saturation_problem`).
+    """
+    x1, s1, x2, s2 = (np.asarray(v, dtype=float) for v in (x1, s1, x2, s2))
+    none = ((s1 == 0) & (s2 == 0)) | (x1 == 0) | (x2 == 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.sqrt(np.where(s1 > 0, s1 * x1 / np.where(none, 1.0, s2 * x2), 0.0))
+        a = np.where(s1 > 0, (x1 - r * x2) / (1 - r), x1)
+        b = np.where(s1 > 0, s1 * x1 / (x1 - a) ** 2, s2 * x2 / (x2 - x1) ** 2)
+    return np.where(none, 0.0, a), np.where(none, 0.0, b)
+
+
+def saturation_problem(x1: float, s1: float, x2: float, s2: float) -> str | None:
+    """Why two saturation points cannot define a curve, or None (spec §0)."""
+    if (s1 == 0 and s2 == 0) or x1 == 0 or x2 == 0:
+        return None
+    if s1 < 0 or s2 < 0:
+        return f"saturation factors must be >= 0 (S1 = {s1:g}, S2 = {s2:g})"
+    if not (0 < x1 < x2):
+        return f"saturation points need 0 < E1 < E2 (E1 = {x1:g}, E2 = {x2:g})"
+    if s2 * x2 <= s1 * x1:
+        return f"saturation needs S2·E2 > S1·E1 (S1 = {s1:g} at {x1:g}, S2 = {s2:g} at {x2:g})"
+    return None
+
+
+class ExciterInputs(NamedTuple):
+    """Signals an exciter reads from its machine, arrays (n_exc,).
+
+    Attributes:
+      ec: terminal voltage magnitude, p.u.
+      vt: terminal voltage phasor, network frame, complex p.u.
+      it: machine current injected into the bus, network frame, complex p.u. on MBASE.
+      xadifd: field current XadIfd, p.u.
+      dw: speed deviation, p.u.
+    """
+
+    ec: Array
+    vt: Array
+    it: Array
+    xadifd: Array
+    dw: Array

@@ -1,0 +1,378 @@
+"""Turbine-governors: TGOV1, IEEEG1, GAST, IEESGO, HYGOV.
+
+CON orders, equations and initialisation follow `shared/specs/machines-exciters-governors.md`
+§9-§13 (PSS/E model library conventions). Every quantity is per unit on the machine base
+MBASE; the input is the machine's speed deviation Δω (p.u., positive = overspeed), the
+output its mechanical power Pm (p.u. MBASE); time constants in seconds.
+
+Zero time constants bypass a lag (output = input, state held) where the structure allows;
+where a division remains the CON must be > 0 and such data are rejected when read.
+Non-windup limits freeze the derivative inside `dynamics` and are listed in `limits`, so
+that the integrator can clip the state after every update (spec §0).
+"""
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrid.io.dyr import DyrRecord
+from jaxgrid.models.base import (Array, Con, DeviceModel, ModelError, Params, States,
+                                 device_label, freeze_at_limits, lag, lead_lag_output)
+
+# Smallest gate opening used in the HYGOV head h = (q/g)², p.u.: a closed gate with
+# flow is unphysical; the floor keeps h finite (and differentiable) if the gate closes.
+G_OPEN_MIN = 1e-3
+
+# |ΣK − 1| above which IEEEG1 power fractions are reported as not summing to one.
+K_SUM_TOL = 1e-6
+
+
+def _t(name: str, info: str, positive: bool = False) -> Con:
+    return Con(name, "s", info, 0.0, positive=positive)
+
+
+def _pu(name: str, info: str, lo: float = -np.inf, positive: bool = False) -> Con:
+    return Con(name, "p.u.", info, lo, positive=positive)
+
+
+def _fraction(name: str, info: str) -> Con:
+    return Con(name, "p.u.", info, 0.0, 1.0)
+
+
+def _lag_output(x: Array, u: Array, t: Array) -> Array:
+    """Output of a unity lag whose state is x: x, or its input u where t == 0 (bypassed)."""
+    return jnp.where(t > 0, x, u)
+
+
+def _outside(v: Array, lo: Array, hi: Array) -> Array:
+    return (v < lo) | (v > hi)
+
+
+class GovernorModel(DeviceModel):
+    """A turbine-governor family: Pm (p.u. MBASE) from the speed deviation Δω (p.u.).
+
+    `p` and states are dicts of arrays (n_gov,), one row per unit.
+    """
+
+    @classmethod
+    def prepare(cls, p: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Derived constants added at compile time (NumPy)."""
+        return p
+
+    @classmethod
+    def init(cls, p: Params, pm0) -> tuple[Params, States]:
+        """(params with the reference added, initial states) for a steady state at Pm0 (p.u.)."""
+        raise NotImplementedError
+
+    @classmethod
+    def dynamics(cls, p: Params, x: States, dw) -> tuple[Array, States]:
+        """(Pm (n,) p.u. MBASE, {state: d/dt}) at speed deviation Δω (n,) p.u."""
+        raise NotImplementedError
+
+    @classmethod
+    def init_violations(cls, p: Params, x: States) -> dict[str, Array]:
+        """{variable: bool (n,)}: units whose initial value lies outside its limits.
+
+        By default the states outside their non-windup `limits`.
+        """
+        return {name: _outside(x[name], lo, hi) for name, (lo, hi) in cls.limits(p).items()}
+
+    @classmethod
+    def notes(cls, p: dict[str, np.ndarray]) -> list[str]:
+        """Warn-level remarks on the data (nothing by default)."""
+        return []
+
+
+class Tgov1(GovernorModel):
+    """Steam turbine-governor TGOV1 (spec §9): droop, non-windup valve lag, reheat lead-lag."""
+
+    name = "TGOV1"
+    cons = (_pu("r", "permanent droop R", 0.0, positive=True),
+            _t("t1", "valve time constant T1", positive=True),
+            _pu("vmax", "maximum valve position VMAX"),
+            _pu("vmin", "minimum valve position VMIN"),
+            _t("t2", "turbine lead time constant T2 (numerator)"),
+            _t("t3", "turbine lag time constant T3 (reheater)", positive=True),
+            _pu("dt", "turbine damping coefficient Dt", 0.0))
+    states = ("x1", "x2")
+
+    @classmethod
+    def check_combination(cls, p):
+        if p["vmin"] > p["vmax"]:
+            return f"needs VMIN <= VMAX (VMIN = {p['vmin']:g}, VMAX = {p['vmax']:g})"
+        return None
+
+    @classmethod
+    def init(cls, p, pm0):
+        pm0 = jnp.asarray(pm0, dtype=float)
+        return dict(p, pref=p["r"] * pm0), {"x1": pm0, "x2": pm0}
+
+    @classmethod
+    def dynamics(cls, p, x, dw):
+        dx1 = ((p["pref"] - dw) / p["r"] - x["x1"]) / p["t1"]
+        dx = {"x1": freeze_at_limits(dx1, x["x1"], p["vmin"], p["vmax"]),
+              "x2": (x["x1"] - x["x2"]) / p["t3"]}
+        return lead_lag_output(x["x2"], x["x1"], p["t2"], p["t3"]) - p["dt"] * dw, dx
+
+    @classmethod
+    def limits(cls, p):
+        return {"x1": (p["vmin"], p["vmax"])}
+
+
+class Ieeeg1(GovernorModel):
+    """IEEE type 1 steam governor IEEEG1 (spec §10), one machine (JBUS = 0).
+
+    The low-pressure outputs K2, K4, K6, K8 would drive a second machine and are unused.
+    """
+
+    name = "IEEEG1"
+    n_icons = 2
+    cons = (_pu("k", "governor gain K (1/droop)", 0.0),
+            _t("t1", "governor lag time constant T1"),
+            _t("t2", "governor lead time constant T2"),
+            _t("t3", "valve positioner time constant T3", positive=True),
+            Con("uo", "p.u./s", "maximum valve opening rate Uo", 0.0, positive=True),
+            Con("uc", "p.u./s", "maximum valve closing rate Uc (< 0)", hi=0.0),
+            _pu("pmax", "maximum valve opening PMAX"),
+            _pu("pmin", "minimum valve opening PMIN"),
+            _t("t4", "steam chest time constant T4"),
+            _fraction("k1", "HP fraction after T4"), _fraction("k2", "LP fraction after T4"),
+            _t("t5", "second boiler pass / reheater time constant T5"),
+            _fraction("k3", "HP fraction after T5"), _fraction("k4", "LP fraction after T5"),
+            _t("t6", "third boiler pass time constant T6"),
+            _fraction("k5", "HP fraction after T6"), _fraction("k6", "LP fraction after T6"),
+            _t("t7", "fourth boiler pass time constant T7"),
+            _fraction("k7", "HP fraction after T7"), _fraction("k8", "LP fraction after T7"))
+    states = ("x_ll", "pgv", "y4", "y5", "y6", "y7")
+
+    @classmethod
+    def check_icons(cls, record: DyrRecord, icons) -> None:
+        jbus, machine = icons
+        if jbus != 0:
+            raise ModelError(f"{device_label(record)}: ICON JBUS = {jbus:g} (M = {machine:g}): "
+                             f"a second (low-pressure) machine is not supported; use JBUS = 0")
+
+    @classmethod
+    def check_combination(cls, p):
+        if p["uc"] >= 0:
+            return f"needs Uc < 0 (Uc = {p['uc']:g} p.u./s): the valve could never close"
+        if p["pmin"] > p["pmax"]:
+            return f"needs PMIN <= PMAX (PMIN = {p['pmin']:g}, PMAX = {p['pmax']:g})"
+        if p["k1"] + p["k3"] + p["k5"] + p["k7"] <= 0:
+            return "needs K1 + K3 + K5 + K7 > 0 (no power reaches the machine)"
+        return None
+
+    @classmethod
+    def prepare(cls, p):
+        return dict(p, k_hp=p["k1"] + p["k3"] + p["k5"] + p["k7"])
+
+    @classmethod
+    def notes(cls, p):
+        out = []
+        k_hp = p["k1"] + p["k3"] + p["k5"] + p["k7"]
+        k_lp = p["k2"] + p["k4"] + p["k6"] + p["k8"]
+        for k, (hp, lp) in enumerate(zip(k_hp, k_lp)):
+            if abs(hp + lp - 1.0) > K_SUM_TOL:
+                out.append(f"IEEEG1 unit {k}: K1 + ... + K8 = {hp + lp:g}, not 1")
+            if lp > 0:
+                out.append(f"IEEEG1 unit {k}: K2 + K4 + K6 + K8 = {lp:g} drive no machine "
+                           f"(JBUS = 0) and are dropped")
+        return out
+
+    @classmethod
+    def init(cls, p, pm0):
+        pgv0 = jnp.asarray(pm0, dtype=float) / p["k_hp"]
+        x = {"x_ll": jnp.zeros_like(pgv0), "pgv": pgv0,
+             "y4": pgv0, "y5": pgv0, "y6": pgv0, "y7": pgv0}
+        return dict(p, p0=pgv0), x
+
+    @classmethod
+    def dynamics(cls, p, x, dw):
+        speed = p["k"] * lead_lag_output(x["x_ll"], dw, p["t2"], p["t1"])
+        valve_speed = jnp.clip((p["p0"] - speed - x["pgv"]) / p["t3"], p["uc"], p["uo"])
+        dx = {"x_ll": lag(x["x_ll"], dw, p["t1"]),
+              "pgv": freeze_at_limits(valve_speed, x["pgv"], p["pmin"], p["pmax"])}
+        u, pm = x["pgv"], 0.0
+        for stage, t, gain in (("y4", "t4", "k1"), ("y5", "t5", "k3"),
+                               ("y6", "t6", "k5"), ("y7", "t7", "k7")):
+            dx[stage] = lag(x[stage], u, p[t])
+            u = _lag_output(x[stage], u, p[t])
+            pm = pm + p[gain] * u
+        return pm, dx
+
+    @classmethod
+    def limits(cls, p):
+        return {"pgv": (p["pmin"], p["pmax"])}
+
+
+class Gast(GovernorModel):
+    """Gas turbine GAST (spec §11): droop, load (exhaust temperature) limit, two lags."""
+
+    name = "GAST"
+    cons = (_pu("r", "speed droop R", 0.0, positive=True),
+            _t("t1", "fuel valve time constant T1", positive=True),
+            _t("t2", "fuel system time constant T2", positive=True),
+            _t("t3", "load limit (exhaust temperature) time constant T3", positive=True),
+            _pu("at", "ambient temperature load limit AT"),
+            _pu("kt", "temperature limiter gain KT", 0.0),
+            _pu("vmax", "maximum fuel valve opening VMAX"),
+            _pu("vmin", "minimum fuel valve opening VMIN"),
+            _pu("dturb", "turbine damping coefficient Dturb", 0.0))
+    states = ("x1", "x2", "x3")
+
+    @classmethod
+    def check_combination(cls, p):
+        if p["vmin"] > p["vmax"]:
+            return f"needs VMIN <= VMAX (VMIN = {p['vmin']:g}, VMAX = {p['vmax']:g})"
+        return None
+
+    @classmethod
+    def init(cls, p, pm0):
+        pm0 = jnp.asarray(pm0, dtype=float)
+        return dict(p, lref=pm0), {"x1": pm0, "x2": pm0, "x3": pm0}
+
+    @classmethod
+    def dynamics(cls, p, x, dw):
+        demand = p["lref"] - dw / p["r"]
+        load_limit = p["at"] + p["kt"] * (p["at"] - x["x3"])
+        dx1 = (jnp.minimum(demand, load_limit) - x["x1"]) / p["t1"]
+        dx = {"x1": freeze_at_limits(dx1, x["x1"], p["vmin"], p["vmax"]),
+              "x2": (x["x1"] - x["x2"]) / p["t2"],
+              "x3": (x["x2"] - x["x3"]) / p["t3"]}
+        return x["x2"] - p["dturb"] * dw, dx
+
+    @classmethod
+    def limits(cls, p):
+        return {"x1": (p["vmin"], p["vmax"])}
+
+    @classmethod
+    def init_violations(cls, p, x):
+        """Also x3 (= Pm0) above AT: the load limit would then pull the unit down."""
+        return super().init_violations(p, x) | {"x3": x["x3"] > p["at"]}
+
+
+class Ieesgo(GovernorModel):
+    """IEEE standard governor IEESGO (spec §12).
+
+    The speed filter K1·(1 + sT2)/((1 + sT1)(1 + sT3)) is a lead-lag over `t_ll` followed
+    by a lag `t_lag`: the lead T2 is paired with T1, or with T3 where T1 = 0, so that it is
+    kept whenever one lag exists (with T1 = T3 = 0 the pure lead cannot be realised and
+    T2 is ignored).
+    """
+
+    name = "IEESGO"
+    cons = (_t("t1", "controller lag time constant T1"),
+            _t("t2", "controller lead time constant T2"),
+            _t("t3", "governor lag time constant T3"),
+            _t("t4", "steam chest (delay) time constant T4"),
+            _t("t5", "reheater time constant T5"),
+            _t("t6", "crossover time constant T6"),
+            _pu("k1", "governor gain K1 (1/droop)", 0.0),
+            _fraction("k2", "fraction K2 passed to the reheater stage"),
+            _fraction("k3", "fraction K3 passed to the crossover stage"),
+            _pu("pmax", "maximum valve position PMAX"),
+            _pu("pmin", "minimum valve position PMIN"))
+    states = ("x_ll", "x_lag", "y4", "y5", "y6")
+
+    @classmethod
+    def check_combination(cls, p):
+        if p["pmin"] > p["pmax"]:
+            return f"needs PMIN <= PMAX (PMIN = {p['pmin']:g}, PMAX = {p['pmax']:g})"
+        return None
+
+    @classmethod
+    def prepare(cls, p):
+        t1_used = p["t1"] > 0
+        return dict(p, t_ll=np.where(t1_used, p["t1"], p["t3"]),
+                    t_lag=np.where(t1_used, p["t3"], 0.0))
+
+    @classmethod
+    def init(cls, p, pm0):
+        pm0 = jnp.asarray(pm0, dtype=float)
+        zero = jnp.zeros_like(pm0)
+        x = {"x_ll": zero, "x_lag": zero, "y4": pm0, "y5": p["k2"] * pm0,
+             "y6": p["k3"] * p["k2"] * pm0}
+        return dict(p, p0=pm0), x
+
+    @classmethod
+    def dynamics(cls, p, x, dw):
+        lead = lead_lag_output(x["x_ll"], dw, p["t2"], p["t_ll"])
+        speed = p["k1"] * _lag_output(x["x_lag"], lead, p["t_lag"])
+        pgv = jnp.clip(p["p0"] - speed, p["pmin"], p["pmax"])
+        y4 = _lag_output(x["y4"], pgv, p["t4"])
+        y5 = _lag_output(x["y5"], p["k2"] * y4, p["t5"])
+        y6 = _lag_output(x["y6"], p["k3"] * y5, p["t6"])
+        dx = {"x_ll": lag(x["x_ll"], dw, p["t_ll"]),
+              "x_lag": lag(x["x_lag"], lead, p["t_lag"]),
+              "y4": lag(x["y4"], pgv, p["t4"]),
+              "y5": lag(x["y5"], p["k2"] * y4, p["t5"]),
+              "y6": lag(x["y6"], p["k3"] * y5, p["t6"])}
+        return (1.0 - p["k2"]) * y4 + (1.0 - p["k3"]) * y5 + y6, dx
+
+    @classmethod
+    def init_violations(cls, p, x):
+        """Valve position Pgv0 = P0 outside the hard clip [PMIN, PMAX]."""
+        return {"pgv": _outside(p["p0"], p["pmin"], p["pmax"])}
+
+
+class Hygov(GovernorModel):
+    """Hydro turbine-governor HYGOV (spec §13).
+
+    PSS/E names R (permanent droop) and r (temporary droop) coincide in lower case: they
+    are `r` and `r_temp` here. VELM placement [verify in spec]: the PI controller
+    (1 + sTr)/(r·Tr·s) is a proportional path x1/r plus an integrator xi whose rate
+    x1/(r·Tr) is clipped to ±VELM and whose value is non-windup in [GMIN, GMAX]; the
+    desired gate c = xi + x1/r itself is not clipped. In the head h = (q/g)² the gate is
+    floored at `G_OPEN_MIN`.
+    """
+
+    name = "HYGOV"
+    cons = (_pu("r", "permanent droop R", 0.0),
+            _pu("r_temp", "temporary droop r (PSS/E 'r')", 0.0, positive=True),
+            _t("tr", "governor reset time constant Tr", positive=True),
+            _t("tf", "filter time constant Tf", positive=True),
+            _t("tg", "gate servo time constant Tg", positive=True),
+            Con("velm", "p.u./s", "gate velocity limit VELM", 0.0, positive=True),
+            _pu("gmax", "maximum gate opening GMAX", 0.0, positive=True),
+            _pu("gmin", "minimum gate opening GMIN", 0.0),
+            _t("tw", "water inertia time constant TW", positive=True),
+            _pu("at", "turbine gain At", 0.0, positive=True),
+            _pu("dturb", "turbine damping coefficient Dturb", 0.0),
+            _pu("qnl", "no-load flow qNL", 0.0))
+    states = ("x1", "xi", "g", "q")
+
+    @classmethod
+    def check_combination(cls, p):
+        if p["gmin"] >= p["gmax"]:
+            return f"needs GMIN < GMAX (GMIN = {p['gmin']:g}, GMAX = {p['gmax']:g})"
+        return None
+
+    @classmethod
+    def init(cls, p, pm0):
+        q0 = jnp.asarray(pm0, dtype=float) / p["at"] + p["qnl"]
+        x = {"x1": jnp.zeros_like(q0), "xi": q0, "g": q0, "q": q0}
+        return dict(p, nref=p["r"] * q0), x
+
+    @classmethod
+    def dynamics(cls, p, x, dw):
+        c = x["xi"] + x["x1"] / p["r_temp"]
+        e = p["nref"] - dw - p["r"] * c
+        rate = jnp.clip(x["x1"] / (p["r_temp"] * p["tr"]), -p["velm"], p["velm"])
+        head = (x["q"] / jnp.maximum(x["g"], G_OPEN_MIN)) ** 2
+        dx = {"x1": (e - x["x1"]) / p["tf"],
+              "xi": freeze_at_limits(rate, x["xi"], p["gmin"], p["gmax"]),
+              "g": (c - x["g"]) / p["tg"],
+              "q": (1.0 - head) / p["tw"]}
+        return p["at"] * head * (x["q"] - p["qnl"]) - p["dturb"] * dw * x["g"], dx
+
+    @classmethod
+    def limits(cls, p):
+        return {"xi": (p["gmin"], p["gmax"])}
+
+    @classmethod
+    def init_violations(cls, p, x):
+        """Gate g0 = xi0 = q0 outside [GMIN, GMAX]."""
+        return {"g": _outside(x["g"], p["gmin"], p["gmax"])}
+
+
+GOVERNORS = {m.name: m for m in (Tgov1, Ieeeg1, Gast, Ieesgo, Hygov)}
