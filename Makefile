@@ -18,6 +18,7 @@ test:  ## the test suite (2 simulated CPU devices, see tests/conftest.py)
 
 bench:  ## benchmarks; figures go to bench_results/*.json
 	$(PY) -m experiments.bench_powerflow --out bench_results/powerflow.json
+	$(PY) -m experiments.bench_sim --out bench_results/sim.json
 
 clean:
 	rm -rf $(VENV) results bench_results .pytest_cache

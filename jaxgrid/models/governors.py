@@ -83,7 +83,21 @@ class GovernorModel(DeviceModel):
         return []
 
 
-class Tgov1(GovernorModel):
+class _ValveLimited(GovernorModel):
+    """A governor whose first state x1 is a valve held non-windup in [VMIN, VMAX]."""
+
+    @classmethod
+    def check_combination(cls, p):
+        if p["vmin"] > p["vmax"]:
+            return f"needs VMIN <= VMAX (VMIN = {p['vmin']:g}, VMAX = {p['vmax']:g})"
+        return None
+
+    @classmethod
+    def limits(cls, p):
+        return {"x1": (p["vmin"], p["vmax"])}
+
+
+class Tgov1(_ValveLimited):
     """Steam turbine-governor TGOV1 (spec §9): droop, non-windup valve lag, reheat lead-lag."""
 
     name = "TGOV1"
@@ -97,12 +111,6 @@ class Tgov1(GovernorModel):
     states = ("x1", "x2")
 
     @classmethod
-    def check_combination(cls, p):
-        if p["vmin"] > p["vmax"]:
-            return f"needs VMIN <= VMAX (VMIN = {p['vmin']:g}, VMAX = {p['vmax']:g})"
-        return None
-
-    @classmethod
     def init(cls, p, pm0):
         pm0 = jnp.asarray(pm0, dtype=float)
         return dict(p, pref=p["r"] * pm0), {"x1": pm0, "x2": pm0}
@@ -113,10 +121,6 @@ class Tgov1(GovernorModel):
         dx = {"x1": freeze_at_limits(dx1, x["x1"], p["vmin"], p["vmax"]),
               "x2": (x["x1"] - x["x2"]) / p["t3"]}
         return lead_lag_output(x["x2"], x["x1"], p["t2"], p["t3"]) - p["dt"] * dw, dx
-
-    @classmethod
-    def limits(cls, p):
-        return {"x1": (p["vmin"], p["vmax"])}
 
 
 class Ieeeg1(GovernorModel):
@@ -205,7 +209,7 @@ class Ieeeg1(GovernorModel):
         return {"pgv": (p["pmin"], p["pmax"])}
 
 
-class Gast(GovernorModel):
+class Gast(_ValveLimited):
     """Gas turbine GAST (spec §11): droop, load (exhaust temperature) limit, two lags."""
 
     name = "GAST"
@@ -221,12 +225,6 @@ class Gast(GovernorModel):
     states = ("x1", "x2", "x3")
 
     @classmethod
-    def check_combination(cls, p):
-        if p["vmin"] > p["vmax"]:
-            return f"needs VMIN <= VMAX (VMIN = {p['vmin']:g}, VMAX = {p['vmax']:g})"
-        return None
-
-    @classmethod
     def init(cls, p, pm0):
         pm0 = jnp.asarray(pm0, dtype=float)
         return dict(p, lref=pm0), {"x1": pm0, "x2": pm0, "x3": pm0}
@@ -240,10 +238,6 @@ class Gast(GovernorModel):
               "x2": (x["x1"] - x["x2"]) / p["t2"],
               "x3": (x["x2"] - x["x3"]) / p["t3"]}
         return x["x2"] - p["dturb"] * dw, dx
-
-    @classmethod
-    def limits(cls, p):
-        return {"x1": (p["vmin"], p["vmax"])}
 
     @classmethod
     def init_violations(cls, p, x):

@@ -141,11 +141,18 @@ class Genrou(MachineModel):
         if not p["xl"] < p["xppd"] < p["xpd"] <= p["xd"]:
             return (f"needs Xl < X''d < X'd <= Xd (Xl = {p['xl']:g}, X''d = {p['xppd']:g}, "
                     f"X'd = {p['xpd']:g}, Xd = {p['xd']:g})")
+        if not p["tppdo"] < p["tpdo"]:
+            return "needs T''do < T'do"
+        return cls.q_axis_problem(p) or cls.saturation_problem(p)
+
+    @classmethod
+    def q_axis_problem(cls, p):
+        """Why the q-axis data are inconsistent, or None."""
         if not p["xppd"] < p["xpq"] <= p["xq"]:
             return f"needs X''q < X'q <= Xq (X''q = {p['xppd']:g}, X'q = {p['xpq']:g}, Xq = {p['xq']:g})"
-        if not (p["tppdo"] < p["tpdo"] and p["tppqo"] < p["tpqo"]):
-            return "needs T''do < T'do and T''qo < T'qo"
-        return cls.saturation_problem(p)
+        if not p["tppqo"] < p["tpqo"]:
+            return "needs T''qo < T'qo"
+        return None
 
     @classmethod
     def saturation_problem(cls, p):
@@ -237,17 +244,10 @@ class Gensal(Genrou):
     states = ("eq1", "psikd", "psiq2", "delta", "dw")
 
     @classmethod
-    def check_combination(cls, p):
-        if p["h"] <= 0:
-            return f"H = {p['h']:g} s: must be > 0"
-        if not p["xl"] < p["xppd"] < p["xpd"] <= p["xd"]:
-            return (f"needs Xl < X''d < X'd <= Xd (Xl = {p['xl']:g}, X''d = {p['xppd']:g}, "
-                    f"X'd = {p['xpd']:g}, Xd = {p['xd']:g})")
+    def q_axis_problem(cls, p):
         if not p["xppd"] < p["xq"]:
             return f"needs X''q < Xq (X''q = {p['xppd']:g}, Xq = {p['xq']:g})"
-        if not p["tppdo"] < p["tpdo"]:
-            return "needs T''do < T'do"
-        return cls.saturation_problem(p)
+        return None
 
     @classmethod
     def prepare(cls, p):

@@ -1,0 +1,151 @@
+"""Simulation benchmark: batched 10 s fault rollouts vs batch size and device count, vs ANDES.
+
+    python -m experiments.bench_sim [--cases ieee39 npcc] [--batch-sizes 1 4 16 64 256 1024]
+                                    [--devices 1 2] [--out bench_results/sim.json]
+
+Cases: `ieee39` is the PNNL 39-bus file (../shared/cases, motor loads left out), `npcc` the
+140-bus NPCC case that ANDES ships, `ieee300` the PNNL 300-bus file. Each task is a 0.1 s
+bolted fault at 1.0 s on a different bus, 10 s at dt = 5 ms, sampled every 0.1 s (the
+load-shedding control step). For each batch size and device count the batch axis is
+sharded over a 1-D mesh of CPU devices (NamedSharding); the first call (compile + run) and
+the best warm call are timed. ANDES runs the same case and fault in the same process.
+
+The models are compiled with no load slots (`CompileOptions(load_buses=())`): these are
+pure fault rollouts, as ANDES runs them. A load-shedding environment adds one slot per
+controlled load bus, and the network solve grows with the square of the slot count.
+"""
+from __future__ import annotations
+
+import os
+
+os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                           + " --xla_force_host_platform_device_count=2").strip()
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
+
+from experiments.andes_reference import run_andes, write_psse_dyr  # noqa: E402
+from jaxgrid import network  # noqa: E402
+from jaxgrid.compile import CompileOptions, compile_model  # noqa: E402
+from jaxgrid.io.dyr import read_dyr  # noqa: E402
+from jaxgrid.io.raw import read_raw  # noqa: E402
+from jaxgrid.simulate import (FaultEvent, heun_step, make_task, simulate_batch,  # noqa: E402
+                              stack_tasks)
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "cases"
+T_END, DT, DECIMATION = 10.0, 0.005, 20
+LOAD_BUSES = ()  # no controllable loads: see the module docstring
+
+
+def _andes_cases() -> Path:
+    import andes
+    return Path(andes.__file__).parent / "cases"
+
+
+CASES = {  # name: (raw, dyr, models dropped for both simulators)
+    "ieee39": (lambda: SHARED / "ieee39/IEEE39bus_multiloads_xfmr4_smallX_v30.raw",
+               lambda: SHARED / "ieee39/IEEE39bus_3AC.dyr", ("USRLOD",)),
+    "npcc": (lambda: _andes_cases() / "npcc/npcc.raw",
+             lambda: _andes_cases() / "npcc/npcc_full.dyr", ()),
+    "ieee300": (lambda: SHARED / "ieee300/IEEE300Bus_modified_noHVDC_v2.raw",
+                lambda: SHARED / "ieee300/IEEE300_genrou_exdc1_tgov1_zone1ac.dyr", ("USRLOD",)),
+}
+
+
+def _timed(fn):
+    start = time.perf_counter()
+    out = jax.block_until_ready(fn())
+    return out, time.perf_counter() - start
+
+
+def step_compile_seconds(model) -> float:
+    """Seconds to lower and compile one Heun step of `model` (no run)."""
+    task = make_task(model, FaultEvent(model.bus_numbers[0], 1.0, 0.1))
+    fault = network.fault_view(model.network, task.fault_bus, task.fault_z)
+    step = jax.jit(heun_step, static_argnames=("dt",))
+    start = time.perf_counter()
+    step.lower(model, model.initial, np.float32(0.0), dt=DT, task=task, fault=fault).compile()
+    return time.perf_counter() - start
+
+
+def bench_case(name: str, batch_sizes, device_counts, repeats: int, with_andes: bool) -> dict:
+    raw_fn, dyr_fn, drop = CASES[name]
+    folder = tempfile.mkdtemp()
+    dyr = write_psse_dyr(str(dyr_fn()), os.path.join(folder, f"{name}.dyr"), drop)
+    raw = str(raw_fn())
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = compile_model(read_raw(raw), read_dyr(dyr), CompileOptions(strict=False, load_buses=LOAD_BUSES))
+    result = {"case": name, "n_bus": model.n_bus, "n_gen": model.n_gen,
+              "n_slot": len(model.slot_bus), "model_compile_s": round(time.perf_counter() - start, 3),
+              "step_compile_s": round(step_compile_seconds(model), 3), "runs": []}
+    # fault buses: the machines' buses excluded, cycling over the rest
+    candidates = [b for b in model.bus_numbers if b > 0 and b not in model.gen_bus]
+    for n_dev in device_counts:
+        devices = jax.devices()[:n_dev]
+        mesh = Mesh(np.array(devices), ("batch",))
+        for batch in batch_sizes:
+            if batch % n_dev:
+                continue
+            tasks = stack_tasks([make_task(model, FaultEvent(candidates[k % len(candidates)],
+                                                             1.0, 0.1)) for k in range(batch)])
+            tasks = jax.device_put(tasks, NamedSharding(mesh, PartitionSpec("batch")))
+            run = lambda: simulate_batch(model, tasks, T_END, DT, DECIMATION)  # noqa: E731
+            out, first = _timed(run)
+            warm = min(_timed(run)[1] for _ in range(repeats))
+            row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
+                   "warm_s": round(warm, 4), "rollouts_per_s": round(batch / warm, 2),
+                   "sim_s_per_wall_s": round(batch * T_END / warm, 1),
+                   "diverged": int(np.sum(np.asarray(out.diverged)))}
+            print(name, row, flush=True)
+            result["runs"].append(row)
+    if with_andes:
+        try:
+            ref = run_andes(raw, dyr, T_END, candidates[0], 1.0, 0.1, tstep=DT)
+        except Exception as err:  # ANDES reads PSS/E v33 layouts only; report, go on
+            result["andes_error"] = f"{type(err).__name__}: {err}"
+            print(name, "ANDES could not run:", result["andes_error"], flush=True)
+            return result
+        best = max(r["rollouts_per_s"] for r in result["runs"])
+        result["andes_tds_s"] = round(ref.wall_s, 3)
+        result["best_rollouts_per_s"] = best
+        result["ratio_to_andes"] = round(best * ref.wall_s, 1)
+        single = [r for r in result["runs"] if r["batch"] == 1 and r["devices"] == 1]
+        if single:
+            result["ratio_one_at_a_time_to_andes"] = round(single[0]["rollouts_per_s"] * ref.wall_s, 1)
+        print(name, {k: v for k, v in result.items() if k != "runs"}, flush=True)
+    return result
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--cases", nargs="*", default=["ieee39", "npcc"], choices=list(CASES))
+    parser.add_argument("--batch-sizes", nargs="*", type=int, default=[1, 4, 16, 64, 256, 1024])
+    parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--no-andes", action="store_true", help="skip the ANDES comparison")
+    parser.add_argument("--out", default="bench_results/sim.json")
+    args = parser.parse_args(argv)
+    report = {"machine": platform.processor() or platform.machine(),
+              "jax": jax.__version__, "backend": jax.default_backend(),
+              "devices": len(jax.devices()), "t_end_s": T_END, "dt_s": DT,
+              "sample_every_s": DT * DECIMATION,
+              "cases": [bench_case(c, args.batch_sizes, args.devices, args.repeats,
+                                   not args.no_andes) for c in args.cases]}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(report, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
