@@ -1,6 +1,10 @@
 """Reference trajectories from ANDES (CURENT, PyPI `andes`) for the same case, fault and horizon.
 
-Used by the validation tests and by the simulation benchmark. ANDES reads the same PSS/E
+Used by the validation tests and by the simulation benchmark; as a command it prints the
+errors of this project's simulator against ANDES for one case and fault:
+
+    python -m experiments.andes_reference --raw R --dyr D --fault-bus B [--drop IEEEST ST2CUT]
+ ANDES reads the same PSS/E
 RAW and DYR files; its `Toggle` records are not part of PSS/E and must not be in the DYR.
 ANDES converts constant-power loads to constant impedance in time-domain simulation by
 default (`PQ.config.p2z = q2z = 1`), which matches `LoadSplit()`'s default.
@@ -79,3 +83,79 @@ def write_psse_dyr(source: str, target: str, drop_models: tuple[str, ...] = ()) 
     with open(target, "w") as f:
         f.write("/".join(keep) + "/\n")
     return target
+
+
+@dataclasses.dataclass(frozen=True)
+class Errors:
+    """Errors of a trajectory against ANDES outside `settle` s after each event.
+
+    v_max, v_rms: bus voltage magnitude, p.u.; speed: largest |Δω| error, p.u.;
+    angle_deg: largest error of rotor angles relative to the first machine, degrees.
+    """
+
+    v_max: float
+    v_rms: float
+    speed: float
+    angle_deg: float
+
+
+def trajectory_errors(model, traj, ref: AndesRun, event_times, settle: float = 0.03) -> Errors:
+    """Compare a single-rollout `Trajectory` of `model` with `ref` at the trajectory's times.
+
+    ANDES's machines are matched to ours by bus, the k-th at a bus to the k-th here.
+    """
+    t = np.asarray(traj.t)
+    keep = np.all([(t < e - 1e-9) | (t >= e + settle) for e in event_times], axis=0)
+
+    def at_our_times(a):
+        return np.stack([np.interp(t, ref.t, a[:, k]) for k in range(a.shape[1])], axis=1)
+
+    buses = [model.bus_numbers.index(b) for b in ref.bus_ids]
+    v_err = np.abs(np.asarray(traj.vm)[:, buses] - at_our_times(ref.vm))[keep]
+    machines: list[int] = []
+    for b in ref.gen_bus:
+        machines.append(next(k for k, gb in enumerate(model.gen_bus)
+                             if gb == b and k not in machines))
+    speed_err = np.abs(np.asarray(traj.speed_dev)[:, machines] - at_our_times(ref.speed_dev))
+    ours, theirs = np.asarray(traj.angle)[:, machines], at_our_times(ref.angle)
+    rel = (ours - ours[:, :1]) - (theirs - theirs[:, :1])
+    return Errors(v_max=float(v_err.max()), v_rms=float(np.sqrt(np.mean(v_err ** 2))),
+                  speed=float(speed_err[keep].max()),
+                  angle_deg=float(np.degrees(np.abs(rel[keep]).max())))
+
+
+def main(argv=None) -> None:
+    import argparse
+    import os
+    import tempfile
+
+    from jaxgrid.compile import CompileOptions, compile_model
+    from jaxgrid.io.dyr import read_dyr
+    from jaxgrid.io.raw import read_raw
+    from jaxgrid.powerflow import PowerFlowOptions, solve
+    from jaxgrid.simulate import FaultEvent, simulate
+
+    parser = argparse.ArgumentParser(description="errors against ANDES for one bus fault")
+    parser.add_argument("--raw", required=True)
+    parser.add_argument("--dyr", required=True)
+    parser.add_argument("--fault-bus", type=int, required=True)
+    parser.add_argument("--fault-start", type=float, default=1.0)
+    parser.add_argument("--fault-duration", type=float, default=0.1)
+    parser.add_argument("--t-end", type=float, default=10.0)
+    parser.add_argument("--dt", type=float, default=0.005)
+    parser.add_argument("--drop", nargs="*", default=(), help="models removed for both tools")
+    args = parser.parse_args(argv)
+    dyr = write_psse_dyr(args.dyr, os.path.join(tempfile.mkdtemp(), "case.dyr"), tuple(args.drop))
+    ref = run_andes(args.raw, dyr, args.t_end, args.fault_bus, args.fault_start,
+                    args.fault_duration, tstep=args.dt)
+    case = read_raw(args.raw)  # ANDES's power flow does not enforce Q limits; match it
+    model = compile_model(case, read_dyr(dyr), CompileOptions(strict=False),
+                          pf=solve(case, PowerFlowOptions(enforce_q_limits=False)))
+    fault = FaultEvent(args.fault_bus, args.fault_start, args.fault_duration)
+    traj = simulate(model, args.t_end, args.dt, fault=fault)
+    errors = trajectory_errors(model, traj, ref, (fault.start, fault.start + fault.duration))
+    print(f"{args.raw}: {errors}, ANDES TDS {ref.wall_s:.2f} s, diverged {bool(traj.diverged)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -21,6 +21,11 @@ def _index(group):
     return jnp.asarray(group.machine)
 
 
+def machine_state(x: GridState, name: str):
+    """(n_gen,) one state of every machine in model order, e.g. "dw" (p.u.) or "delta" (rad)."""
+    return jnp.concatenate([xs[name] for xs in x.machines])
+
+
 def machine_emf(model: GridModel, x: GridState):
     """(n_gen,) complex internal EMFs, network frame, p.u."""
     return jnp.concatenate([g.model.emf(g.params, xs) for g, xs in zip(model.machines, x.machines)])
@@ -49,7 +54,7 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active, lo
     v, _, residual, emf = solve_network(model, x, fault, active, load_scale)
     vt = v[:model.n_gen]
     current = (emf - vt) / model.z_source
-    dw = jnp.concatenate([xs["dw"] for xs in x.machines])
+    dw = machine_state(x, "dw")
     xadifd = jnp.concatenate([g.model.field_current(g.params, xs, current[_index(g)])
                               for g, xs in zip(model.machines, x.machines)])
     efd = jnp.asarray(model.efd0)

@@ -22,7 +22,8 @@ import numpy as np
 from flax import struct
 
 from jaxgrid import network
-from jaxgrid.dynamics import axpy, clip_to_limits, derivatives, device_states, solve_network
+from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, device_states, machine_state,
+                              solve_network)
 from jaxgrid.grid import GridModel, GridState
 
 
@@ -169,8 +170,7 @@ def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: n
 def within_bounds(x: GridState, bounds: Bounds):
     """() bool: every state finite, speeds and voltages inside `bounds`."""
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in jax.tree.leaves(x)]))
-    speed = jnp.concatenate([m["dw"] for m in x.machines])
-    return (finite & jnp.all(jnp.abs(speed) <= bounds.max_speed_dev)
+    return (finite & jnp.all(jnp.abs(machine_state(x, "dw")) <= bounds.max_speed_dev)
             & jnp.all(jnp.abs(x.v) <= bounds.max_voltage))
 
 
@@ -180,9 +180,7 @@ def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: net
     active = fault_active(task, t, dt)
     _, current, _, _ = solve_network(model, x, fault, active, load_scale(task, n_load, t, dt))
     v = network.bus_voltages(model.network, fault, active, current)
-    speed = jnp.concatenate([m["dw"] for m in x.machines])
-    angle = jnp.concatenate([m["delta"] for m in x.machines])
-    return jnp.abs(v), jnp.angle(v), speed, angle
+    return jnp.abs(v), jnp.angle(v), machine_state(x, "dw"), machine_state(x, "delta")
 
 
 @partial(jax.jit, static_argnames=("n_samples", "decimation", "dt", "bounds"))

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments.andes_reference import run_andes, write_psse_dyr
+from experiments.andes_reference import run_andes, trajectory_errors, write_psse_dyr
 from jaxgrid.compile import CompileOptions, ModelWarning, compile_model
 from jaxgrid.io.dyr import DyrError, read_dyr
 from jaxgrid.io.raw import read_raw
@@ -73,28 +73,6 @@ def shared_models(shared_cases):
     return out
 
 
-def _errors(model, traj, ref, fault_bus):
-    """Errors against ANDES outside 30 ms after each event: (V max, V rms, speed, angle deg)."""
-    t = np.asarray(traj.t)
-    events = (FAULT["start"], FAULT["start"] + FAULT["duration"])
-    keep = np.all([(t < e - 1e-9) | (t >= e + 0.03) for e in events], axis=0)
-    buses = [model.bus_numbers.index(b) for b in ref.bus_ids]
-    vm_ref = np.stack([np.interp(t, ref.t, ref.vm[:, k]) for k in range(len(buses))], axis=1)
-    v_err = np.abs(np.asarray(traj.vm)[:, buses] - vm_ref)[keep]
-    machines = []  # k-th machine at a bus in ANDES <-> k-th at that bus here
-    for b in ref.gen_bus:
-        machines.append(next(k for k, gb in enumerate(model.gen_bus)
-                             if gb == b and k not in machines))
-    interp = lambda a: np.stack([np.interp(t, ref.t, a[:, k])  # noqa: E731
-                                 for k in range(a.shape[1])], axis=1)
-    speed_err = np.abs(np.asarray(traj.speed_dev)[:, machines] - interp(ref.speed_dev))[keep]
-    ours = np.asarray(traj.angle)[:, machines]
-    theirs = interp(ref.angle)
-    rel = (ours - ours[:, :1]) - (theirs - theirs[:, :1])
-    return (v_err.max(), np.sqrt(np.mean(v_err ** 2)), speed_err.max(),
-            np.degrees(np.abs(rel[keep]).max()))
-
-
 @pytest.mark.parametrize("name", list(ANDES_CASES))
 def test_fault_matches_andes(name, andes_files, models):
     raw, dyr, bus = andes_files[name]
@@ -102,7 +80,9 @@ def test_fault_matches_andes(name, andes_files, models):
     model = models[name]
     traj = simulate(model, T_END, DT, fault=FaultEvent(bus, **FAULT))
     assert not bool(traj.diverged), f"{name}: rollout diverged at {float(traj.diverged_at)} s"
-    v_max, v_rms, speed, angle = _errors(model, traj, ref, bus)
+    errors = trajectory_errors(model, traj, ref,
+                               (FAULT["start"], FAULT["start"] + FAULT["duration"]))
+    v_max, v_rms, speed, angle = errors.v_max, errors.v_rms, errors.speed, errors.angle_deg
     print(f"{name}: V max {v_max:.4f} rms {v_rms:.5f} speed {speed:.2e} angle {angle:.2f} deg")
     assert v_max <= V_MAX_ERR, f"{name}: bus voltage error {v_max:.4f} p.u."
     assert v_rms <= V_RMS_ERR, f"{name}: RMS bus voltage error {v_rms:.5f} p.u."
