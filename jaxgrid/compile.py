@@ -1,9 +1,11 @@
 """Compile a solved case and its DYR records into a `GridModel`.
 
-Host side, NumPy and float64: match dynamic records to generators, read and check their
-CONs, initialise every device from the power flow in the order machines -> exciters ->
-governors (spec §0), fold machines' Norton admittances and constant-admittance loads into
-the network matrix and invert it, then check that all derivatives vanish at t = 0.
+Host side, NumPy and float64: match dynamic records to generators and load records, read
+and check their CONs, initialise every device from the power flow in the order machines
+-> exciters -> governors (spec §0), then load models (motors; what they do not draw of
+their bus's load stays static), fold machines' and motors' Norton admittances and
+constant-admittance loads into the network matrix and invert it, then check that all
+derivatives vanish at t = 0.
 """
 from __future__ import annotations
 
@@ -17,17 +19,19 @@ import numpy as np
 
 from jaxgrid import network
 from jaxgrid.case import ISOLATED, Case
-from jaxgrid.dynamics import derivatives
+from jaxgrid.dynamics import derivatives, update_loads
 from jaxgrid.grid import DeviceGroup, GridModel, GridState
 from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
-from jaxgrid.models.base import ExciterInputs, ModelError
+from jaxgrid.models.acmotor import LOAD_MOTORS, MotorOptions
+from jaxgrid.models.base import ExciterInputs, LoadSite, ModelError
 from jaxgrid.models.exciters import EXCITERS
 from jaxgrid.models.governors import GOVERNORS
 from jaxgrid.models.loads import LoadSplit, split_bus_loads
 from jaxgrid.models.machines import MACHINES
 from jaxgrid.powerflow import PowerFlowResult, admittance_matrix, bus_loads, solve
 
-SUPPORTED = tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS)
+LOAD_MODELS = dict(LOAD_MOTORS)
+SUPPORTED = tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS) + tuple(LOAD_MODELS)
 
 # What replaces a model that is not supported, by kind (lenient mode).
 _FALLBACK = {
@@ -70,7 +74,8 @@ class CompileOptions:
         says what replaces each.
       loads: ZIP split of static loads during dynamics (default: constant admittance).
       load_buses: RAW bus numbers whose load can be changed (load shedding); None: every
-        bus with an in-service load.
+        bus with an in-service load. Buses with a load model always get a slot.
+      motors: readings of motor-load data where reference simulators disagree.
       precision: "float32" (default time loop) or "float64".
       sweeps: fixed-point sweeps per network solution (>= 1).
       init_tolerance: largest |derivative| at t = 0 accepted without an InitWarning.
@@ -79,6 +84,7 @@ class CompileOptions:
     strict: bool = True
     loads: LoadSplit = LoadSplit()
     load_buses: tuple[int, ...] | None = None
+    motors: MotorOptions = MotorOptions()
     precision: str = "float32"
     sweeps: int = 2
     init_tolerance: float = 1e-5
@@ -104,7 +110,10 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     on = gen.in_service & (case.buses.kind[gen.bus] != ISOLATED)
     keys = {(int(case.buses.number[gen.bus[k]]), gen.gen_id[k].strip().upper()): int(k)
             for k in np.flatnonzero(on)}
-    records = _classify(dyr, keys, options.strict, notes)
+    loads = case.loads
+    load_keys = {(int(case.buses.number[loads.bus[k]]), loads.load_id[k].strip().upper()): int(k)
+                 for k in np.flatnonzero(loads.in_service)}
+    records = _classify(dyr, keys, load_keys, options.strict, notes)
     groups = _machine_groups(case, records["machine"], keys, options.strict, notes)
     order = np.array([u for _, units, _ in groups for u in units], dtype=int)
     position = {int(g): k for k, g in enumerate(order)}
@@ -119,7 +128,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
             k = [position[u] for u in units]
             params, x, efd, pm = model.init(_jnp(params), jnp.asarray(vt0[k]), jnp.asarray(i0[k]))
             xadifd.append(np.asarray(model.field_current(params, x, jnp.asarray(i0[k]))))
-            machines.append(DeviceGroup(params=_np(params), model=model, machine=tuple(k),
+            machines.append(DeviceGroup(params=_np(params), model=model, index=tuple(k),
                                         labels=_labels(case, model.name, units)))
             m_states.append(_np(x))
             efd0.append(np.asarray(efd))
@@ -137,21 +146,33 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     z_source = np.concatenate([g.params["ra"] + 1j * g.params["xs"] for g in machines])
     y_norton = ratio / z_source
     s_load = _bus_load_at(case, pf)
-    y_z, s_i, s_p = split_bus_loads(s_load, v0, options.loads)
+    motors = _load_model_groups(case, pf, records["load"], load_keys, options, notes)
+    s_static = s_load.copy()
+    for _, _, buses, p, _, _, s0 in motors:
+        np.add.at(s_static, buses, -s0)
+    y_z, s_i, s_p = split_bus_loads(s_static, v0, options.loads)
     y = admittance_matrix(case)
     y[np.diag_indices(case.n_bus)] += y_z + _unmodelled_admittance(case, pf, on, order, notes)
     np.add.at(y, (gen.bus[order], gen.bus[order]), y_norton)
-    load_bus = _load_buses(case, s_load, options)
+    for _, _, buses, p, _, _, _ in motors:
+        np.add.at(y, (buses, buses), p["y_norton"])
+    load_bus = _load_buses(case, s_load, options, [b for m in motors for b in m[2]])
     slot_bus = np.concatenate([gen.bus[order], load_bus]).astype(int)
+    slot_of = {int(b): k for k, b in enumerate(load_bus)}
+    load_groups = tuple(
+        DeviceGroup(params=p, model=model, index=tuple(slot_of[int(b)] for b in buses),
+                    labels=labels) for model, labels, buses, p, _, _, _ in motors)
 
     model = GridModel(
-        machines=tuple(machines), exciters=exciters, governors=governors,
+        machines=tuple(machines), exciters=exciters, governors=governors, loads=load_groups,
         network=network.build(y, slot_bus, np.complex128),
         z_source=z_source, y_norton=y_norton, mbase_ratio=ratio, efd0=efd0, pm0=pm0,
         load_y=y_z[load_bus], load_s_i=s_i[load_bus], load_s_p=s_p[load_bus],
         load_vm0=np.maximum(pf.vm[load_bus], 1e-6), v0=v0,
         initial=GridState(machines=tuple(m_states), exciters=e_states, governors=g_states,
-                          v=v0[slot_bus]),
+                          loads=tuple(m[4] for m in motors),
+                          load_flags=tuple(m[5] for m in motors),
+                          load_left=np.ones(len(load_bus)), v=v0[slot_bus]),
         bus_numbers=tuple(int(b) for b in case.buses.number),
         gen_bus=tuple(int(case.buses.number[gen.bus[g]]) for g in order),
         gen_id=tuple(gen.gen_id[g].strip() for g in order),
@@ -197,15 +218,20 @@ def _kind(name: str) -> str:
     return "other"
 
 
-def _classify(dyr: DyrData, keys: dict, strict: bool, notes: list[str]) -> dict[str, list]:
+def _classify(dyr: DyrData, keys: dict, load_keys: dict, strict: bool,
+              notes: list[str]) -> dict[str, list]:
     """Supported records by kind; unsupported ones raise (strict) or warn with their fallback."""
-    out: dict[str, list[DyrRecord]] = {"machine": [], "exciter": [], "governor": []}
+    out: dict[str, list[DyrRecord]] = {"machine": [], "exciter": [], "governor": [], "load": []}
     unsupported: dict[str, list[DyrRecord]] = {}
     for r in dyr.records:
         kind = "load" if r.record_type == "USRLOD" else _kind(r.model)
-        if r.model not in SUPPORTED or kind == "load":
+        if r.model not in SUPPORTED:
             unsupported.setdefault(r.model, []).append(r)
-        elif _key(r) not in keys:
+        elif kind == "load" and _key(r) not in load_keys:
+            raise ModelError(f"{r.source}:{r.line}: {r.model} at bus {r.bus} id "
+                             f"'{r.device_id}': the case has no in-service load record "
+                             f"(bus {r.bus}, LID '{r.device_id}')")
+        elif kind != "load" and _key(r) not in keys:
             notes.append(f"{r.source}:{r.line}: {r.model} at bus {r.bus} id '{r.device_id}' "
                          "has no in-service generator; ignored")
         else:
@@ -276,7 +302,7 @@ def _controller_groups(case, records, registry, keys, position, init):
         units = [keys[_key(r)] for r in rs]
         k = [position[u] for u in units]
         params, x = init(model, _jnp(model.prepare(model.read(rs))), k)
-        groups.append(DeviceGroup(params=_np(params), model=model, machine=tuple(k),
+        groups.append(DeviceGroup(params=_np(params), model=model, index=tuple(k),
                                   labels=_labels(case, name, units)))
         states.append(_np(x))
     return tuple(groups), tuple(states)
@@ -301,18 +327,54 @@ def _unmodelled_admittance(case, pf, on, order, notes) -> np.ndarray:
     return -np.conj(s) / np.maximum(pf.vm, 1e-6) ** 2
 
 
-def _load_buses(case: Case, s_load: np.ndarray, options: CompileOptions) -> np.ndarray:
-    """Bus indices that get a load slot."""
+def _load_model_groups(case, pf, records, load_keys, options, notes):
+    """[(model, labels, bus indices, params, states, flags, s0)] per load model in use.
+
+    s0 (n_unit,) complex: what each unit draws at the power flow, p.u. system base.
+    """
+    loads = case.loads
+    vm = pf.vm[loads.bus]
+    record_p = loads.p_power + loads.p_current * vm + loads.p_impedance * vm ** 2
+    bus_p = np.zeros(case.n_bus)
+    np.add.at(bus_p, loads.bus[loads.in_service], record_p[loads.in_service])
+    groups = []
+    for name, model in LOAD_MODELS.items():
+        rs = [r for r in records if r.model == name]
+        if not rs:
+            continue
+        units = np.array([load_keys[_key(r)] for r in rs])
+        buses = loads.bus[units]
+        labels = tuple(f"{name} at bus {r.bus} id '{r.device_id}'" for r in rs)
+        site = LoadSite(v0=pf.vm[buses] * np.exp(1j * pf.va[buses]), record_p=record_p[units],
+                        bus_p=bus_p[buses], sbase=case.base_mva, f_nom=case.frequency_hz,
+                        labels=labels)
+        with jax.enable_x64(True):
+            p, x, z, s0, report = model.init(model.read(rs), site, options.motors)
+        notes.extend(f"load report: {line}" for line in report)
+        groups.append((model, labels, buses, _np(p), _np(x), _np(z), np.asarray(s0)))
+    drawn = np.zeros(case.n_bus)
+    for _, _, buses, _, _, _, s0 in groups:
+        np.add.at(drawn, buses, s0.real)
+    for b in np.flatnonzero(drawn > bus_p + 1e-9):
+        notes.append(f"load report: bus {case.buses.number[b]}: load models draw "
+                     f"{drawn[b] * case.base_mva:.2f} MW of a {bus_p[b] * case.base_mva:.2f} MW "
+                     "load; the remainder is a negative load")
+    return groups
+
+
+def _load_buses(case: Case, s_load: np.ndarray, options: CompileOptions,
+                model_buses) -> np.ndarray:
+    """Bus indices that get a load slot (always those with a load model)."""
     has_load = np.flatnonzero(np.abs(s_load) > 0)
     if options.load_buses is None:
-        return has_load
+        return np.union1d(has_load, np.asarray(model_buses, dtype=int)).astype(int)
     chosen = case.bus_index(list(options.load_buses)) if options.load_buses else np.zeros(0, int)
     no_load = [case.buses.number[b] for b in chosen if b not in set(has_load)]
     if no_load:
         raise ValueError(f"CompileOptions.load_buses: buses {no_load} carry no load")
     if options.loads.has_injections:
         chosen = has_load  # every ZIP load with I or P parts needs a slot
-    return np.asarray(sorted(set(chosen.tolist())), dtype=int)
+    return np.asarray(sorted(set(chosen.tolist()) | set(int(b) for b in model_buses)), dtype=int)
 
 
 # --------------------------------------------------------------------------- #
@@ -320,16 +382,19 @@ def _load_buses(case: Case, s_load: np.ndarray, options: CompileOptions) -> np.n
 # --------------------------------------------------------------------------- #
 
 def _check_initial_state(model: GridModel, tolerance: float, notes: list[str]) -> None:
-    """Warn (and note) every device variable that is not at rest or starts outside a limit."""
+    """Warn (and note) every device variable that is not at rest or starts outside a limit.
+
+    Load models' flags must also stay put over one 1 ms step at the power-flow voltages.
+    """
     with jax.enable_x64(True):
+        x0 = model.initial
         fault = network.fault_view(model.network, 0, 1.0)
-        scale = jnp.ones(len(model.load_bus))
-        (dm, de, dg), _, _ = derivatives(model, model.initial, fault, 0.0, scale)
+        rates, v, _ = derivatives(model, x0, fault, 0.0)
         problems = []
-        for groups, rates, states in ((model.machines, dm, model.initial.machines),
-                                      (model.exciters, de, model.initial.exciters),
-                                      (model.governors, dg, model.initial.governors)):
-            for g, dx, x in zip(groups, rates, states):
+        for groups, drift, states in zip(
+                (model.machines, model.exciters, model.governors, model.loads), rates,
+                x0.integrated()):
+            for g, dx, x in zip(groups, drift, states):
                 for name, rate in dx.items():
                     rate = np.abs(np.asarray(rate))
                     for u in np.flatnonzero(rate > tolerance):
@@ -338,6 +403,13 @@ def _check_initial_state(model: GridModel, tolerance: float, notes: list[str]) -
                     for u in np.flatnonzero(np.asarray(bad)):
                         problems.append(f"{g.labels[u]}: initial {name} = "
                                         f"{float(x[name][u]):.4g} is outside its limits")
+        stepped = update_loads(model, x0.replace(v=v), x0.v, 1e-3)
+        for g, before, after in zip(model.loads, x0.load_flags, stepped.load_flags):
+            for name in before:
+                change = np.abs(np.asarray(after[name]) - np.asarray(before[name]))
+                for u in np.flatnonzero(change > tolerance):
+                    problems.append(f"{g.labels[u]}: {name} moves by {change[u]:.3g} in the "
+                                    "first 1 ms")
     if problems:
         message = (f"{len(problems)} device variable(s) not at rest at t = 0: "
                    + "; ".join(problems[:20]) + ("; ..." if len(problems) > 20 else ""))

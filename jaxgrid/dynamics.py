@@ -1,8 +1,10 @@
 """The grid's differential-algebraic right-hand side: one network solution, then all devices.
 
 Order of one evaluation (spec §0 initialisation order, run forwards):
-machine EMFs -> Norton sources -> network (with fault, loads) -> machine currents ->
-exciters (EFD) -> governors (Pm) -> machine derivatives.
+machine EMFs -> Norton sources -> network (with fault, static loads and load models, all
+scaled by the connected fraction) -> machine currents -> exciters (EFD) -> governors (Pm)
+-> machine and load-model derivatives. Once per accepted step `update_loads` advances the
+load models' discrete logic.
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ from jaxgrid.models.base import ExciterInputs
 
 
 def _index(group):
-    return jnp.asarray(group.machine)
+    return jnp.asarray(group.index)
 
 
 def machine_state(x: GridState, name: str):
@@ -31,27 +33,42 @@ def machine_emf(model: GridModel, x: GridState):
     return jnp.concatenate([g.model.emf(g.params, xs) for g, xs in zip(model.machines, x.machines)])
 
 
-def solve_network(model: GridModel, x: GridState, fault: network.Fault, active, load_scale):
+def load_injection(model: GridModel, x: GridState, v_load):
+    """(n_load,) current injected at the load slots at voltages v_load (n_load,), p.u.
+
+    Static ZIP parts plus, per load model, its Norton correction y_norton·V − left·I(V)
+    (the Norton admittance itself sits in the network matrix).
+    """
+    left = x.load_left
+    total = loads.injection(v_load, left, model.load_y, model.load_s_i, model.load_s_p,
+                            model.load_vm0, model.pq_break)
+    for g, xs, zs in zip(model.loads, x.loads, x.load_flags):
+        k = _index(g)
+        v = v_load[k]
+        drawn = left[k] * g.model.current(g.params, xs, zs, v)
+        total = total.at[k].add(g.params["y_norton"] * v - drawn)
+    return total
+
+
+def solve_network(model: GridModel, x: GridState, fault: network.Fault, active):
     """Slot voltages (n_slot,), slot injections (n_slot,), residual, and EMFs (n_gen,)."""
     emf = machine_emf(model, x)
-    inject = partial(loads.injection, scale=load_scale, y_z=model.load_y, s_i=model.load_s_i,
-                     s_p=model.load_s_p, vm0=model.load_vm0, pq_break=model.pq_break)
     v, current, residual = network.solve(model.network, fault, active, emf * model.y_norton,
-                                         inject, x.v, model.sweeps)
+                                         partial(load_injection, model, x), x.v, model.sweeps)
     return v, current, residual, emf
 
 
-def derivatives(model: GridModel, x: GridState, fault: network.Fault, active, load_scale):
-    """Time derivatives of every device state.
+def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
+    """Time derivatives of every integrated state.
 
     Args:
-      x: current state; fault/active: the task's fault and whether it is on (0/1);
-      load_scale: (n_load,) fraction of each load slot's initial load still connected.
+      x: current state; fault/active: the task's fault and whether it is on (0/1).
     Returns:
-      (dx, v, residual): dx a tuple (machines, exciters, governors) of {state: rate} dicts
-      mirroring x; v (n_slot,) the slot voltages; residual the network fixed-point residual.
+      (dx, v, residual): dx a tuple (machines, exciters, governors, loads) of {state: rate}
+      dicts mirroring x.integrated(); v (n_slot,) the slot voltages; residual the network
+      fixed-point residual.
     """
-    v, _, residual, emf = solve_network(model, x, fault, active, load_scale)
+    v, _, residual, emf = solve_network(model, x, fault, active)
     vt = v[:model.n_gen]
     current = (emf - vt) / model.z_source
     dw = machine_state(x, "dw")
@@ -77,17 +94,27 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active, lo
         g.model.derivative(g.params, xs, current[_index(g)], efd[_index(g)], pm[_index(g)],
                            model.omega_b)
         for g, xs in zip(model.machines, x.machines))
-    return (d_machines, tuple(d_exciters), tuple(d_governors)), v, residual
+    v_load = v[model.n_gen:]
+    d_loads = tuple(g.model.derivative(g.params, xs, zs, v_load[_index(g)])
+                    for g, xs, zs in zip(model.loads, x.loads, x.load_flags))
+    return (d_machines, tuple(d_exciters), tuple(d_governors), d_loads), v, residual
 
 
-def device_states(x: GridState):
-    """The integrated part of a state: (machines, exciters, governors)."""
-    return (x.machines, x.exciters, x.governors)
+def update_loads(model: GridModel, x: GridState, v_old, dt: float) -> GridState:
+    """x with the load models' flags advanced after an accepted step of dt seconds.
+
+    x.v is the step's network solution, v_old (n_slot,) the previous one.
+    """
+    n = model.n_gen
+    flags = tuple(g.model.update(g.params, xs, zs, x.v[n:][_index(g)], v_old[n:][_index(g)],
+                                 dt)
+                  for g, xs, zs in zip(model.loads, x.loads, x.load_flags))
+    return x.replace(load_flags=flags)
 
 
 def clip_to_limits(model: GridModel, states):
     """Clip non-windup states to their limits after an update (cannot overshoot by a step)."""
-    machines, exciters, governors = states
+    machines, exciters, governors, loads = states
 
     def clip(groups, values):
         out = []
@@ -98,7 +125,8 @@ def clip_to_limits(model: GridModel, states):
             out.append(xs)
         return tuple(out)
 
-    return machines, clip(model.exciters, exciters), clip(model.governors, governors)
+    return (machines, clip(model.exciters, exciters), clip(model.governors, governors),
+            clip(model.loads, loads))
 
 
 def axpy(a, dx, x):

@@ -19,13 +19,14 @@ class DeviceGroup:
     Attributes:
       params: {name: (n_unit,)} CONs (lower-case PSS/E names), derived constants, references.
       model: the model class (static).
-      machine: (n_unit,) static index of each unit's machine in the model's machine order.
+      index: (n_unit,) static index of each unit's machine in the model's machine order
+        (machines, exciters, governors) or of its load slot (load models).
       labels: static "MODEL at bus B id 'I'" per unit, for messages.
     """
 
     params: dict
     model: type = struct.field(pytree_node=False)
-    machine: tuple[int, ...] = struct.field(pytree_node=False)
+    index: tuple[int, ...] = struct.field(pytree_node=False)
     labels: tuple[str, ...] = struct.field(pytree_node=False)
 
 
@@ -34,14 +35,32 @@ class GridState:
     """The dynamic state of one rollout.
 
     Attributes:
-      machines, exciters, governors: per device group, {state name: (n_unit,)} (p.u., rad).
+      machines, exciters, governors, loads: per device group, {state name: (n_unit,)}
+        continuous states (p.u., rad), integrated by Heun.
+      load_flags: per load group, {flag: (n_unit,)} states changed once per step (timers,
+        run/stall flags, latches, measured voltage and frequency).
+      load_left: (n_load,) fraction of each load slot's initial load still connected
+        (load shedding; every load type at the slot is scaled by it).
       v: (n_slot,) complex slot voltages of the last network solution (warm start), p.u.
     """
 
     machines: tuple[dict, ...]
     exciters: tuple[dict, ...]
     governors: tuple[dict, ...]
+    loads: tuple[dict, ...]
+    load_flags: tuple[dict, ...]
+    load_left: np.ndarray
     v: np.ndarray
+
+    def integrated(self) -> tuple:
+        """The Heun-integrated part: (machines, exciters, governors, loads)."""
+        return (self.machines, self.exciters, self.governors, self.loads)
+
+    def with_integrated(self, states: tuple, v) -> GridState:
+        """This state with new integrated parts `states` and slot voltages v."""
+        machines, exciters, governors, loads = states
+        return self.replace(machines=machines, exciters=exciters, governors=governors,
+                            loads=loads, v=v)
 
 
 @struct.dataclass
@@ -53,6 +72,7 @@ class GridModel:
 
     Attributes:
       machines, exciters, governors: tuples of DeviceGroup.
+      loads: DeviceGroup per dynamic load model (motors), units indexed by load slot.
       network: impedance views (jaxgrid.network.Network).
       z_source: (n_gen,) complex Norton impedance ra + j·xs, p.u. MBASE.
       y_norton: (n_gen,) complex Norton admittance, p.u. system base.
@@ -75,6 +95,7 @@ class GridModel:
     machines: tuple[DeviceGroup, ...]
     exciters: tuple[DeviceGroup, ...]
     governors: tuple[DeviceGroup, ...]
+    loads: tuple[DeviceGroup, ...]
     network: Network
     z_source: np.ndarray
     y_norton: np.ndarray

@@ -22,8 +22,8 @@ import numpy as np
 from flax import struct
 
 from jaxgrid import network
-from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, device_states, machine_state,
-                              solve_network)
+from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, machine_state, solve_network,
+                              update_loads)
 from jaxgrid.grid import GridModel, GridState
 
 
@@ -45,7 +45,11 @@ class FaultEvent:
 
 @dataclasses.dataclass(frozen=True)
 class LoadChange:
-    """At `time` (s), remove `fraction` of the initial load at `bus` (negative adds load)."""
+    """At `time` (s), shed `fraction` of the initial load at `bus` (every load type there).
+
+    The connected fraction is clipped to [0, 1]: shedding more than what remains sheds
+    what remains; a negative fraction reconnects shed load, at most up to the initial load.
+    """
 
     bus: int
     time: float
@@ -94,6 +98,8 @@ class Trajectory:
       t: (n_t,) s.  vm: (n_t, n_bus) p.u.  va: (n_t, n_bus) rad (buses in model order).
       speed_dev: (n_t, n_gen) Δω, p.u.  angle: (n_t, n_gen) rotor angle δ, rad.
       residual: (n_t,) largest network fixed-point residual since the previous sample, p.u.
+      load_left: (n_t, n_load) connected fraction of each load slot's initial load.
+      load_flags: per load-model group, {flag: (n_t, n_unit)} (e.g. ACMTBLU1 run_a, kcon).
       diverged: () bool.  diverged_at: () s, inf if the rollout never diverged.
       final: GridState at t_end (the frozen state if diverged).
     """
@@ -104,6 +110,8 @@ class Trajectory:
     speed_dev: jnp.ndarray
     angle: jnp.ndarray
     residual: jnp.ndarray
+    load_left: jnp.ndarray
+    load_flags: tuple
     diverged: jnp.ndarray
     diverged_at: jnp.ndarray
     final: GridState
@@ -139,10 +147,19 @@ def _is_on(t, start, dt):
     return (t >= start - 0.5 * dt).astype(t.dtype)
 
 
-def load_scale(task: Task, n_load: int, t, dt):
-    """(n_load,) fraction of each load slot's initial load connected at time t."""
-    removed = task.load_fraction * _is_on(t, task.load_time, dt)
-    return 1.0 - jnp.zeros(n_load, removed.dtype).at[task.load_slot].add(removed)
+def shed(load_left, slot, fraction):
+    """Connected fractions (n_load,) after shedding `fraction` (k,) at load slots `slot` (k,).
+
+    Clipped to [0, 1] per slot (spec acmtblu1 §9): a request beyond what remains sheds
+    what remains.
+    """
+    return jnp.clip(load_left - jnp.zeros_like(load_left).at[slot].add(fraction), 0.0, 1.0)
+
+
+def scheduled_shedding(task: Task, x: GridState, t, dt) -> GridState:
+    """x with the task's load changes that fall due at the step starting at t applied."""
+    due = _is_on(t, task.load_time, dt) * (1.0 - _is_on(t - dt, task.load_time, dt))
+    return x.replace(load_left=shed(x.load_left, task.load_slot, task.load_fraction * due))
 
 
 def fault_active(task: Task, t, dt):
@@ -151,20 +168,23 @@ def fault_active(task: Task, t, dt):
 
 
 def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault):
-    """One modified-Euler step from t to t + dt; returns (state, network residual)."""
-    n_load = len(model.load_bus)
+    """One modified-Euler step from t to t + dt; returns (state, network residual).
+
+    Scheduled load changes apply at the start of the step; the load models' discrete
+    logic advances after the corrector from the corrector's network voltages.
+    """
+    x = scheduled_shedding(task, x, t, dt)
 
     def rates(states, v, time):
-        current = GridState(*states, v=v)
-        return derivatives(model, current, fault, fault_active(task, time, dt),
-                           load_scale(task, n_load, time, dt))
+        return derivatives(model, x.with_integrated(states, v), fault,
+                           fault_active(task, time, dt))
 
-    s0 = device_states(x)
+    s0 = x.integrated()
     k1, v1, r1 = rates(s0, x.v, t)
     predicted = clip_to_limits(model, axpy(dt, k1, s0))
     k2, v2, r2 = rates(predicted, v1, t + dt)
     new = clip_to_limits(model, axpy(0.5 * dt, k2, axpy(0.5 * dt, k1, s0)))
-    return GridState(*new, v=v2), jnp.maximum(r1, r2)
+    return update_loads(model, x.with_integrated(new, v2), x.v, dt), jnp.maximum(r1, r2)
 
 
 def within_bounds(x: GridState, bounds: Bounds):
@@ -175,12 +195,12 @@ def within_bounds(x: GridState, bounds: Bounds):
 
 
 def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault):
-    """(vm (n_bus,), va (n_bus,), Δω (n_gen,), δ (n_gen,)) of state x at time t."""
-    n_load = len(model.load_bus)
+    """(vm (n_bus,), va (n_bus,), Δω (n_gen,), δ (n_gen,), load_left, load_flags) at time t."""
     active = fault_active(task, t, dt)
-    _, current, _, _ = solve_network(model, x, fault, active, load_scale(task, n_load, t, dt))
+    _, current, _, _ = solve_network(model, x, fault, active)
     v = network.bus_voltages(model.network, fault, active, current)
-    return jnp.abs(v), jnp.angle(v), machine_state(x, "dw"), machine_state(x, "delta")
+    return (jnp.abs(v), jnp.angle(v), machine_state(x, "dw"), machine_state(x, "delta"),
+            x.load_left, x.load_flags)
 
 
 @partial(jax.jit, static_argnames=("n_samples", "decimation", "dt", "bounds"))
@@ -212,9 +232,11 @@ def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: f
     first = observe(model, x0, jnp.zeros((), real), dt, task, fault) + (jnp.zeros((), real),)
     init = (x0, jnp.zeros((), bool), jnp.asarray(jnp.inf, real), jnp.zeros((), real))
     (x, diverged, diverged_at, _), samples = jax.lax.scan(sample, init, jnp.arange(n_samples))
-    vm, va, speed, angle, residual = (jnp.concatenate([f[None], s]) for f, s in zip(first, samples))
+    vm, va, speed, angle, left, flags, residual = jax.tree.map(
+        lambda f, s: jnp.concatenate([f[None], s]), first, samples)
     t = jnp.arange(n_samples + 1, dtype=real) * (decimation * dt)
     return Trajectory(t=t, vm=vm, va=va, speed_dev=speed, angle=angle, residual=residual,
+                      load_left=left, load_flags=flags,
                       diverged=diverged, diverged_at=diverged_at, final=x)
 
 

@@ -15,6 +15,36 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED_CASES = REPO.parent / "shared" / "cases"
 
 
+def raw_v33(buses: str, loads: str = "", generators: str = "", branches: str = "", *,
+            rev: int = 33, two_terminal_dc: str = "", facts: str = "") -> str:
+    """A PSS/E v33 RAW text from record blocks (each block: newline-terminated lines)."""
+    return (
+        f"0, 100.00, {rev}, 0, 1, 60.00 / jaxgrid input-error test\n"
+        "HAND WRITTEN TEST CASE\n"
+        "FOR ERROR MESSAGES\n"
+        f"{buses}0 / END OF BUS DATA, BEGIN LOAD DATA\n"
+        f"{loads}0 / END OF LOAD DATA, BEGIN FIXED SHUNT DATA\n"
+        "0 / END OF FIXED SHUNT DATA, BEGIN GENERATOR DATA\n"
+        f"{generators}0 / END OF GENERATOR DATA, BEGIN BRANCH DATA\n"
+        f"{branches}0 / END OF BRANCH DATA, BEGIN TRANSFORMER DATA\n"
+        "0 / END OF TRANSFORMER DATA, BEGIN AREA DATA\n"
+        "0 / END OF AREA DATA, BEGIN TWO-TERMINAL DC DATA\n"
+        f"{two_terminal_dc}0 / END OF TWO-TERMINAL DC DATA, BEGIN VSC DC LINE DATA\n"
+        "0 / END OF VSC DC LINE DATA, BEGIN IMPEDANCE CORRECTION DATA\n"
+        "0 / END OF IMPEDANCE CORRECTION DATA, BEGIN MULTI-TERMINAL DC DATA\n"
+        "0 / END OF MULTI-TERMINAL DC DATA, BEGIN MULTI-SECTION LINE DATA\n"
+        "0 / END OF MULTI-SECTION LINE DATA, BEGIN ZONE DATA\n"
+        "0 / END OF ZONE DATA, BEGIN INTER-AREA TRANSFER DATA\n"
+        "0 / END OF INTER-AREA TRANSFER DATA, BEGIN OWNER DATA\n"
+        "0 / END OF OWNER DATA, BEGIN FACTS DEVICE DATA\n"
+        f"{facts}0 / END OF FACTS DEVICE DATA, BEGIN SWITCHED SHUNT DATA\n"
+        "0 / END OF SWITCHED SHUNT DATA, BEGIN GNE DATA\n"
+        "0 / END OF GNE DATA, BEGIN INDUCTION MACHINE DATA\n"
+        "0 / END OF INDUCTION MACHINE DATA\n"
+        "Q\n"
+    )
+
+
 def andes_cases_dir() -> Path:
     """Folder of the PSS/E test files bundled with the andes package (a test dependency)."""
     import importlib.util

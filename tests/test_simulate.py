@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from experiments.andes_reference import run_andes, trajectory_errors, write_psse_dyr
-from jaxgrid.compile import CompileOptions, ModelWarning, compile_model
-from jaxgrid.io.dyr import DyrError, read_dyr
+from jaxgrid.compile import CompileOptions, compile_model
+from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.powerflow import PowerFlowOptions, solve
 from jaxgrid.simulate import (FaultEvent, LoadChange, main, make_task, rollout, simulate,
@@ -57,22 +57,6 @@ def models(andes_files):
     return out
 
 
-@pytest.fixture(scope="module")
-def shared_models(shared_cases):
-    """The PNNL 39- and 300-bus cases with motor loads left out (lenient mode)."""
-    files = {
-        "ieee39": ("ieee39/IEEE39bus_multiloads_xfmr4_smallX_v30.raw", "ieee39/IEEE39bus_3AC.dyr"),
-        "ieee300": ("ieee300/IEEE300Bus_modified_noHVDC_v2.raw",
-                    "ieee300/IEEE300_genrou_exdc1_tgov1_zone1ac.dyr"),
-    }
-    out = {}
-    for name, (raw, dyr) in files.items():
-        with pytest.warns(ModelWarning, match="ACMTBLU1"):
-            out[name] = compile_model(read_raw(shared_cases / raw),
-                                      read_dyr(shared_cases / dyr), CompileOptions(strict=False))
-    return out
-
-
 @pytest.mark.parametrize("name", list(ANDES_CASES))
 def test_fault_matches_andes(name, andes_files, models):
     raw, dyr, bus = andes_files[name]
@@ -100,23 +84,6 @@ def test_flat_run_stays_flat(name, models):
     deviation, traj = _flat(models[name])
     assert not bool(traj.diverged)
     assert deviation < FLAT_TOL, f"{name}: flat run drifts {deviation:.2e} p.u. from the power flow"
-
-
-@pytest.mark.parametrize("name", ["ieee39", "ieee300"])
-def test_shared_cases_flat_and_faulted(name, shared_models):
-    model = shared_models[name]
-    deviation, _ = _flat(model)
-    assert deviation < FLAT_TOL, f"{name}: flat run drifts {deviation:.2e} p.u."
-    bus = {"ieee39": 16, "ieee300": 9}[name]
-    traj = simulate(model, T_END, DT, fault=FaultEvent(bus, 1.0, 0.08), decimation=100)
-    assert not bool(traj.diverged), f"{name}: diverged at {float(traj.diverged_at)} s"
-    assert float(np.asarray(traj.vm)[:, model.bus_index(bus)].min()) < 0.05, "fault not applied"
-
-
-def test_strict_mode_lists_unsupported_models(shared_cases):
-    case = read_raw(shared_cases / "ieee39/IEEE39bus_multiloads_xfmr4_smallX_v30.raw")
-    with pytest.raises(DyrError, match=r"ACMTBLU1 x3 \(first at line \d+\)"):
-        compile_model(case, read_dyr(shared_cases / "ieee39/IEEE39bus_3AC.dyr"))
 
 
 @pytest.fixture(scope="module")

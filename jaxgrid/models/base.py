@@ -192,3 +192,65 @@ class ExciterInputs(NamedTuple):
     it: Array
     xadifd: Array
     dw: Array
+
+
+class LoadSite(NamedTuple):
+    """Where a load model sits, from the power flow (NumPy, float64, arrays (n_unit,)).
+
+    Attributes:
+      v0: complex bus voltage, p.u.
+      record_p: active power of the unit's RAW load record at |v0|, p.u. system base.
+      bus_p: active power of all loads at the bus at |v0|, p.u. system base.
+      sbase: system base, MVA.  f_nom: nominal frequency, Hz.
+      labels: "MODEL at bus B id 'I'" per unit, for the load report (optional).
+    """
+
+    v0: np.ndarray
+    record_p: np.ndarray
+    bus_p: np.ndarray
+    sbase: float
+    f_nom: float
+    labels: tuple[str, ...] = ()
+
+    def label(self, k: int) -> str:
+        """How the load report names unit k."""
+        return self.labels[k] if self.labels else f"unit {k}"
+
+
+class LoadModel(DeviceModel):
+    """A dynamic load attached to one RAW load record (bus, LID), one row per unit.
+
+    Continuous `states` are integrated with the machines (Heun); discrete `flags` (timers,
+    run/stall flags, latches, measured signals) change once per accepted step in `update`,
+    after the corrector, from that step's network voltage (one-step latency, as in the
+    reference simulators). Every unit has a constant Norton admittance `p["y_norton"]`
+    (complex, p.u. system base) folded into the network matrix; the network sees
+    y_norton·V − shed·current(V) as the unit's injection correction.
+    """
+
+    flags: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def init(cls, p: Params, site: LoadSite, options) -> tuple[Params, States, States, Array, list]:
+        """(p with y_norton and derived constants, states, flags, s0, notes) at the power flow.
+
+        s0: (n,) complex power the units draw at site.v0, p.u. system base (the rest of the
+        bus load stays static). notes: the load report, lines naming the unit by site.label(k)
+        (one per unit, one per substitution of a CON value).
+        """
+        raise NotImplementedError
+
+    @classmethod
+    def current(cls, p: Params, x: States, z: States, v: Array) -> Array:
+        """(n,) complex current drawn at bus voltage v (n,), p.u. system base, before shedding."""
+        raise NotImplementedError
+
+    @classmethod
+    def derivative(cls, p: Params, x: States, z: States, v: Array) -> States:
+        """Rates of the continuous states at bus voltage v (n,) complex."""
+        return {}
+
+    @classmethod
+    def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:
+        """Flags after an accepted step: v the new, v_old the previous bus voltage (n,)."""
+        return z

@@ -1,0 +1,373 @@
+"""ACMTBLU1: the performance-based single-phase air-conditioner motor (WECC motor D, ld1pac).
+
+Equations, CON order and defaults follow `shared/specs/acmtblu1.md`. The model is algebraic
+in the terminal voltage V (running-1, running-2 and stalled P/Q characteristics, §5); all
+its dynamics are per-step logic (§6): measured voltage and frequency lags, winding
+temperatures, stall and restart timers, contactor drop-out and reclose, two under-voltage
+trip stages and the thermal trip ramp. They are `flags` of the `LoadModel` interface,
+updated once per accepted step from that step's network voltage; the lags and temperatures
+use the exact discretisation x += (1 − exp(−dt/T))·(u − x), so T = 0 means "no lag".
+
+The bus frequency input is the filtered derivative of the bus voltage angle,
+f = 1 + Δθ/(ω0·dt) between accepted steps, held while |V| < 0.1 p.u. (the angle of a
+collapsed voltage is meaningless); switching instants give short spikes, as in PSS/E.
+
+Switches where the reference simulators disagree (`MotorOptions`, each [choice] of the spec):
+  share_mode: how much load a motor represents (§3): "psse_load_record" (default, the
+    RAW load record the model is attached to), "interpss_bus_total" (CompLF × the bus's
+    total load, what the original study's simulator InterPSS did), "fraction:x" (x of the
+    load record; GridPACK uses 0.43).
+  vx_rule: the stall-jump voltage Vx (§4): "reference_running1" (default: the running-1
+    curve crossing the stalled power, as InterPSS and GridPACK, which reproduces the
+    original study) or "spec_running2" (the WECC text's running-2 crossing).
+  curve_offsets: "v0" (default; InterPSS/GridPACK: the curves pass through the initial
+    power at V0) or "1pu" (offsets referred to V = 1, as transcribed from the WECC text).
+  restall_b: False (default; the references: one stall timer, parts A and B stall
+    together and a restarted B never stalls again) or True (per-part timers).
+Other choices: CompPF = 0 is rejected (a power factor is needed); Vx is floored at
+`VX_FLOOR` p.u. so a running motor's current stays bounded; the current is computed as
+an equivalent admittance conj(S)/|V|², which is exact and safe at V → 0.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, Params, States)
+
+VX_FLOOR = 0.3  # p.u.: lowest stall-jump voltage (spec §7 guard)
+VX_SCAN_FROM = 0.4  # p.u.: where the Vx search starts (spec §4)
+V_ANGLE_MIN = 0.1  # p.u.: below it the bus frequency measurement holds
+NO_DIP = 10.0  # p.u.: contactor memory "no dip seen" (a finite +inf)
+TIMER_TOL = 1e-9  # s: a timer fires at >= T − TIMER_TOL (spec §6.7)
+SHARE_MODES = ("psse_load_record", "interpss_bus_total", "fraction:x")
+VX_RULES = ("reference_running1", "spec_running2")
+
+
+@dataclasses.dataclass(frozen=True)
+class MotorOptions:
+    """Readings of motor-load data where the reference simulators disagree (module docstring).
+
+    Attributes:
+      share_mode: "psse_load_record" | "interpss_bus_total" | "fraction:x" (0 < x <= 1).
+      vx_rule: "reference_running1" | "spec_running2".
+      curve_offsets: "v0" | "1pu".
+      restall_b: let a restarted part B stall again (per-part timers).
+      stiff_below: s; induction-motor subtransient stages faster than this are dropped
+        (2 × a 5 ms step).
+    """
+
+    share_mode: str = "psse_load_record"
+    vx_rule: str = "reference_running1"
+    curve_offsets: str = "v0"
+    restall_b: bool = False
+    stiff_below: float = 0.01
+
+    def __post_init__(self):
+        if self.share_mode not in SHARE_MODES[:2]:
+            x = self.share_fraction
+            if x is None or not 0.0 < x <= 1.0:
+                raise ValueError(f"share_mode = {self.share_mode!r}: allowed "
+                                 f"{', '.join(SHARE_MODES)} with 0 < x <= 1")
+        if self.vx_rule not in VX_RULES:
+            raise ValueError(f"vx_rule = {self.vx_rule!r}: allowed {', '.join(VX_RULES)}")
+        if self.curve_offsets not in ("v0", "1pu"):
+            raise ValueError(f"curve_offsets = {self.curve_offsets!r}: allowed 'v0' or '1pu'")
+        if not self.stiff_below >= 0:
+            raise ValueError(f"stiff_below = {self.stiff_below!r} s: must be >= 0")
+
+    @property
+    def share_fraction(self) -> float | None:
+        """x of "fraction:x", else None."""
+        head, _, value = self.share_mode.partition(":")
+        if head != "fraction":
+            return None
+        try:
+            return float(value)
+        except ValueError:
+            return None
+
+
+def _t(name, info):
+    return Con(name, "s", info, 0.0, 1e4)
+
+
+def _v(name, info):
+    return Con(name, "p.u.", info, 0.0, 2.0)
+
+
+def _f(name, info):
+    return Con(name, "-", info, 0.0, 1.0)
+
+
+def _k(name, info):
+    return Con(name, "p.u.", info, -100.0, 100.0)
+
+
+class Acmtblu1(LoadModel):
+    """ACMTBLU1 (USRLOD, 35 CONs), one row per motor; powers in p.u. on the motor base Sm."""
+
+    name = "ACMTBLU1"
+    cons = (
+        _t("tstall", "time below Vstall before the motors stall"),
+        _t("trst", "time above Vrst before part B restarts"),
+        _t("tv", "voltage measurement lag"),
+        _t("tf", "frequency measurement lag"),
+        Con("complf", "p.u.", "compressor load factor P/Sm (<= 0 means 1)", -10.0, 10.0),
+        Con("comppf", "-", "compressor power factor (lagging)", 0.0, 1.0, positive=True),
+        _v("vstall", "stall voltage at rated load"),
+        Con("rstall", "p.u.", "stalled resistance, motor base", 0.0, 100.0),
+        Con("xstall", "p.u.", "stalled reactance, motor base", 0.0, 100.0),
+        Con("lfadj", "-", "load sensitivity of Vstall and Vbrk", -10.0, 10.0),
+        _k("kp1", "running-1 P coefficient"), _k("np1", "running-1 P exponent"),
+        _k("kq1", "running-1 Q coefficient"), _k("nq1", "running-1 Q exponent"),
+        _k("kp2", "running-2 P coefficient"), _k("np2", "running-2 P exponent"),
+        _k("kq2", "running-2 Q coefficient"), _k("nq2", "running-2 Q exponent"),
+        _v("vbrk", "breakdown voltage between running regions 1 and 2"),
+        _f("frst", "fraction of motors that can restart (part B)"),
+        _v("vrst", "restart voltage"),
+        _k("cmpkpf", "P frequency sensitivity, p.u. P / p.u. f"),
+        _k("cmpkqf", "Q frequency sensitivity, p.u. Q / p.u. f"),
+        _v("vc1off", "contactors start to drop out below"),
+        _v("vc2off", "all contactors out below"),
+        _v("vc1on", "all dropped contactors back in above"),
+        _v("vc2on", "dropped contactors start to reclose above"),
+        _t("tth", "winding thermal time constant"),
+        Con("th1t", "p.u.", "temperature where thermal tripping starts", -10.0, 100.0),
+        Con("th2t", "p.u.", "temperature where all motors are tripped", -10.0, 100.0),
+        _f("fuvr", "fraction of motors with under-voltage relays"),
+        _v("uvtr1", "UV relay stage-1 pickup"), _t("ttr1", "UV stage-1 time"),
+        _v("uvtr2", "UV relay stage-2 pickup"), _t("ttr2", "UV stage-2 time"),
+    )
+    states = ()
+    flags = ("vm", "fm", "theta_a", "theta_b", "run_a", "run_b", "ts_a", "ts_b", "tr_b",
+             "tu1", "tu2", "kuv", "vc_min", "kcon", "fth_a", "fth_b")
+
+    @classmethod
+    def check_combination(cls, p: dict[str, float]) -> str | None:
+        if p["rstall"] == 0 and p["xstall"] == 0:
+            return "RSTALL = XSTALL = 0: the stalled admittance would be infinite"
+        return None
+
+    # ------------------------------------------------------------------ #
+    # Initialisation (host, NumPy float64)
+    # ------------------------------------------------------------------ #
+
+    @classmethod
+    def init(cls, p: Params, site: LoadSite, options: MotorOptions):
+        p = {k: np.asarray(v, dtype=float) for k, v in p.items()}
+        notes = []
+        raw_lf = p["complf"]
+        lf = np.where(p["complf"] > 0, p["complf"], 1.0)
+        adjust = 1.0 + p["lfadj"] * (lf - 1.0)
+        vstall, vbrk = p["vstall"] * adjust, p["vbrk"] * adjust
+        z2 = p["rstall"] ** 2 + p["xstall"] ** 2
+        gs, bs = p["rstall"] / z2, p["xstall"] / z2
+        motor_p = _motor_share(site, lf, options)
+        sm = motor_p / lf  # motor base / system base
+        v0 = np.abs(site.v0)
+        q_init = lf * np.tan(np.arccos(p["comppf"]))
+        v_ref = v0 if options.curve_offsets == "v0" else np.ones_like(v0)
+        p.update(complf=lf, vstall_adj=vstall, vbrk_adj=vbrk, gs=gs, bs=bs, sm=sm,
+                 omega0=np.full_like(v0, 2 * np.pi * site.f_nom),
+                 restall=np.full_like(v0, float(options.restall_b)),
+                 thermal_on=((p["th1t"] > 0) & (p["th2t"] > p["th1t"])).astype(float))
+        p0 = lf - _running_curve(p, v_ref, "p", 0.0 * v0)
+        q0 = q_init - _running_curve(p, v_ref, "q", 0.0 * v0)
+        p.update(p0=p0, q0=q0)
+        vx, floored = _stall_jump_voltage(p, options.vx_rule)
+        p["vx"] = vx
+        _fix_contactor(p, notes, site)
+        p["y_norton"] = sm * (gs - 1j * bs)
+        s_motor = _power(p, v0, 1.0, 0.0, np)  # motor base, all running, fm = 1
+        current = np.abs(s_motor) / v0
+        theta0 = current ** 2 * p["rstall"]
+        n = v0.shape[0]
+        z = dict(vm=v0, fm=np.ones(n), theta_a=theta0, theta_b=theta0, run_a=np.ones(n),
+                 run_b=np.ones(n), ts_a=np.zeros(n), ts_b=np.zeros(n), tr_b=np.zeros(n),
+                 tu1=np.zeros(n), tu2=np.zeros(n), kuv=np.ones(n), vc_min=np.full(n, NO_DIP),
+                 kcon=np.ones(n), fth_a=np.ones(n), fth_b=np.ones(n))
+        for k in range(n):
+            notes.append(
+                f"{site.label(k)}: {motor_p[k] * site.sbase:.2f} MW motor ({options.share_mode}), "
+                f"Sm = {sm[k] * site.sbase:.2f} MVA, Q = {s_motor[k].imag * sm[k] * site.sbase:.2f} "
+                f"Mvar, Vstall' = {vstall[k]:.4f}, Vbrk' = {vbrk[k]:.4f}, Vx = {vx[k]:.4f} p.u. "
+                f"({options.vx_rule}{', floored' if floored[k] else ''})")
+            if raw_lf[k] <= 0:
+                notes.append(f"{site.label(k)}: COMPLF = {raw_lf[k]:g} <= 0: taken as 1")
+            if not p["thermal_on"][k]:
+                notes.append(f"{site.label(k)}: TH1T = {p['th1t'][k]:g}, TH2T = {p['th2t'][k]:g}: thermal "
+                             "protection disabled")
+            if v0[k] < vbrk[k]:
+                notes.append(f"{site.label(k)}: V0 = {v0[k]:.4f} p.u. is below Vbrk' = {vbrk[k]:.4f}: the motor "
+                             "starts on its running-2 curve")
+            if v0[k] < vstall[k]:
+                notes.append(f"{site.label(k)}: V0 = {v0[k]:.4f} p.u. is below Vstall' = {vstall[k]:.4f}: the "
+                             "motor stalls after Tstall")
+        return p, {}, z, s_motor * sm, notes
+
+    # ------------------------------------------------------------------ #
+    # Network injection and per-step logic (jnp)
+    # ------------------------------------------------------------------ #
+
+    @classmethod
+    def current(cls, p: Params, x: States, z: States, v: Array) -> Array:
+        vmag = jnp.abs(v)
+        dfm = z["fm"] - 1.0
+        s = ((1.0 - p["frst"]) * z["fth_a"] * _power(p, vmag, z["run_a"], dfm, jnp)
+             + p["frst"] * z["fth_b"] * _power(p, vmag, z["run_b"], dfm, jnp))
+        s = p["sm"] * z["kuv"] * z["kcon"] * s
+        return jnp.conj(s) * v / jnp.maximum(vmag ** 2, 1e-12)
+
+    @classmethod
+    def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:
+        vmag = jnp.abs(v)
+        measurable = (vmag > V_ANGLE_MIN) & (jnp.abs(v_old) > V_ANGLE_MIN)
+        step = jnp.angle(v * jnp.conj(jnp.where(measurable, v_old, v)))
+        f = 1.0 + jnp.where(measurable, step, 0.0) / (p["omega0"] * dt)
+        vm = _lag_step(z["vm"], vmag, p["tv"], dt)
+        fm = _lag_step(z["fm"], f, p["tf"], dt)
+        dfm = fm - 1.0
+        theta = {part: _lag_step(z[f"theta_{part}"], _heat(p, vmag, z[f"run_{part}"], dfm),
+                                 p["tth"], dt) for part in "ab"}
+        run_a, run_b, ts_a, ts_b, tr_b = _stall_and_restart(p, z, vmag, dt)
+        vc_min, kcon = _contactor(p, z["vc_min"], vm)
+        tu1 = jnp.where((p["fuvr"] > 0) & (vm < p["uvtr1"]), z["tu1"] + dt, 0.0)
+        tu2 = jnp.where((p["fuvr"] > 0) & (vm < p["uvtr2"]), z["tu2"] + dt, 0.0)
+        uv_trip = (tu1 >= p["ttr1"] - TIMER_TOL) | (tu2 >= p["ttr2"] - TIMER_TOL)
+        kuv = jnp.where(uv_trip & (p["fuvr"] > 0), jnp.minimum(z["kuv"], 1.0 - p["fuvr"]),
+                        z["kuv"])
+        span = jnp.where(p["thermal_on"] > 0, p["th2t"] - p["th1t"], 1.0)
+        fth = {part: jnp.where(p["thermal_on"] > 0, jnp.minimum(
+            z[f"fth_{part}"], jnp.clip((p["th2t"] - theta[part]) / span, 0.0, 1.0)),
+            z[f"fth_{part}"]) for part in "ab"}
+        return dict(vm=vm, fm=fm, theta_a=theta["a"], theta_b=theta["b"], run_a=run_a,
+                    run_b=run_b, ts_a=ts_a, ts_b=ts_b, tr_b=tr_b, tu1=tu1, tu2=tu2, kuv=kuv,
+                    vc_min=vc_min, kcon=kcon, fth_a=fth["a"], fth_b=fth["b"])
+
+
+# --------------------------------------------------------------------------- #
+# Characteristics (spec §5), usable with NumPy (init) and jnp (run): `xp`
+# --------------------------------------------------------------------------- #
+
+def _running_curve(p, vmag, axis: str, running2, xp=np):
+    """Voltage term of the running curve for "p" or "q" (motor p.u.), region by `running2`."""
+    up = xp.maximum(vmag - p["vbrk_adj"], 0.0)
+    down = xp.maximum(p["vbrk_adj"] - vmag, 0.0)
+    one = p[f"k{axis}1"] * up ** p[f"n{axis}1"]
+    two = p[f"k{axis}2"] * down ** p[f"n{axis}2"]
+    return xp.where((running2 > 0) | (vmag < p["vbrk_adj"]), two, one)
+
+
+def _power(p, vmag, running, dfm, xp):
+    """Complex power (motor p.u.) of a part with run flag `running` (1/0) at |V| = vmag."""
+    zero = 0.0 * vmag
+    p_run = (p["p0"] + _running_curve(p, vmag, "p", zero, xp)) * (1.0 + p["cmpkpf"] * dfm)
+    q_run = (p["q0"] + _running_curve(p, vmag, "q", zero, xp)) * (1.0 + p["cmpkqf"] * dfm)
+    stalled = (running < 0.5) | (vmag <= p["vx"])
+    return xp.where(stalled, (p["gs"] + 1j * p["bs"]) * vmag ** 2, p_run + 1j * q_run)
+
+
+def _heat(p, vmag, running, dfm):
+    """I²·Rstall of one motor of a part (spec §6.1), motor p.u."""
+    s = _power(p, vmag, running, dfm, jnp)
+    return (jnp.abs(s) / jnp.maximum(vmag, 1e-6)) ** 2 * p["rstall"]
+
+
+def _lag_step(x, u, t, dt: float):
+    """Exact step of a first-order lag of time constant t (s); t == 0 gives u."""
+    return x + (1.0 - jnp.exp(-dt / jnp.maximum(t, 1e-12))) * (u - x)
+
+
+def _stall_and_restart(p, z, vmag, dt: float):
+    """Run flags and timers after a step (spec §6.2-6.3)."""
+    low = vmag < p["vstall_adj"]
+    fires = lambda timer, limit: timer >= limit - TIMER_TOL  # noqa: E731
+    ts_a = jnp.where((z["run_a"] > 0) & low, z["ts_a"] + dt, 0.0)
+    stall_a = (z["run_a"] > 0) & fires(ts_a, p["tstall"])
+    ts_b = jnp.where((z["run_b"] > 0) & low, z["ts_b"] + dt, 0.0)
+    stall_b = jnp.where(p["restall"] > 0, (z["run_b"] > 0) & fires(ts_b, p["tstall"]),
+                        stall_a & (z["run_b"] > 0))
+    run_a = jnp.where(stall_a, 0.0, z["run_a"])
+    run_b = jnp.where(stall_b, 0.0, z["run_b"])
+    ts_a, ts_b = jnp.where(stall_a, 0.0, ts_a), jnp.where(stall_b, 0.0, ts_b)
+    may_restart = (p["frst"] > 0) & (run_b < 0.5) & (vmag > p["vrst"])
+    tr_b = jnp.where(may_restart, z["tr_b"] + dt, 0.0)
+    restart = may_restart & fires(tr_b, p["trst"])
+    return run_a, jnp.where(restart, 1.0, run_b), ts_a, ts_b, jnp.where(restart, 0.0, tr_b)
+
+
+def _contactor(p, vc_min, vm):
+    """(memory of the deepest dip, connected share Kcon) after a step (spec §6.4)."""
+    on = p["vc1off"] > 0
+    off_span = jnp.where(on, p["vc1off"] - p["vc2off"], 1.0)
+    on_span = jnp.where(on, p["vc1on"] - p["vc2on"], 1.0)
+    vc_min = jnp.minimum(vc_min, vm)
+    f_open = jnp.clip((p["vc1off"] - vc_min) / off_span, 0.0, 1.0)
+    x_rec = jnp.clip((vm - p["vc2on"]) / on_span, 0.0, 1.0)
+    kcon = jnp.where(vm > vc_min, 1.0 - f_open * (1.0 - x_rec), 1.0 - f_open)
+    back = (vm >= p["vc1on"]) | ~on
+    return jnp.where(back, NO_DIP, vc_min), jnp.where(back, 1.0, kcon)
+
+
+# --------------------------------------------------------------------------- #
+# Host-side helpers
+# --------------------------------------------------------------------------- #
+
+def _motor_share(site: LoadSite, lf, options: MotorOptions):
+    """Initial motor active power (p.u. system base) per share_mode (spec §3)."""
+    if options.share_mode == "interpss_bus_total":
+        return lf * site.bus_p
+    if options.share_mode == "psse_load_record":
+        return np.asarray(site.record_p, dtype=float)
+    return options.share_fraction * np.asarray(site.record_p, dtype=float)
+
+
+def _first_crossing(curve, gs, lo, hi):
+    """Smallest V in [lo, hi] with curve(V) <= gs·V² (bisection, 1e-9), or nan if none."""
+    gap = lambda v: gs * v ** 2 - curve(v)  # noqa: E731  increasing below Vbrk'
+    a, b = np.array(lo, dtype=float), np.array(hi, dtype=float)
+    found = gap(b) >= 0
+    at_start = gap(a) >= 0
+    for _ in range(60):
+        mid = 0.5 * (a + b)
+        up = gap(mid) >= 0
+        a, b = np.where(up, a, mid), np.where(up, mid, b)
+    return np.where(at_start, lo, np.where(found, b, np.nan))
+
+
+def _stall_jump_voltage(p, rule: str):
+    """(Vx (n,), floored (n,) bool): the stall-jump voltage of spec §4 and §7."""
+    zero = 0.0 * p["p0"]
+    lo = np.full_like(p["p0"], VX_SCAN_FROM)
+    hi = np.maximum(p["vstall_adj"], lo)
+    if rule == "spec_running2":
+        curve = lambda v: p["p0"] + _running_curve(p, v, "p", zero + 1.0)  # noqa: E731
+        vx = _first_crossing(curve, p["gs"], lo, hi)
+        vx = np.where(np.isnan(vx), p["vstall_adj"], vx)
+    else:
+        up = lambda v: np.maximum(v - p["vbrk_adj"], 0.0)  # noqa: E731
+        curve = lambda v: p["p0"] + p["kp1"] * up(v) ** p["np1"]  # noqa: E731
+        vx = _first_crossing(curve, p["gs"], lo, hi)
+        vx = np.where(np.isnan(vx), 0.0, np.minimum(vx, p["vstall_adj"]))
+    vx = np.minimum(vx, p["vstall_adj"])
+    floored = vx < VX_FLOOR
+    return np.maximum(vx, VX_FLOOR), floored
+
+
+def _fix_contactor(p, notes: list[str], site: LoadSite) -> None:
+    """GridPACK's substitutions for inconsistent contactor voltages (spec §6.4), noted."""
+    bad_off = (p["vc1off"] > 0) & (p["vc2off"] >= p["vc1off"])
+    bad_on = (p["vc1off"] > 0) & (p["vc2on"] >= p["vc1on"])
+    for k in np.flatnonzero(bad_off):
+        notes.append(f"{site.label(k)}: VC2OFF = {p['vc2off'][k]:g} >= VC1OFF = {p['vc1off'][k]:g}: VC2OFF set to 0")
+    for k in np.flatnonzero(bad_on):
+        notes.append(f"{site.label(k)}: VC2ON = {p['vc2on'][k]:g} >= VC1ON = {p['vc1on'][k]:g}: "
+                     f"VC2ON set to VC1ON − 0.1")
+    p["vc2off"] = np.where(bad_off, 0.0, p["vc2off"])
+    p["vc2on"] = np.where(bad_on, p["vc1on"] - 0.1, p["vc2on"])
+
+
+LOAD_MOTORS = {"ACMTBLU1": Acmtblu1}
