@@ -19,6 +19,8 @@ test:  ## the test suite (2 simulated CPU devices, see tests/conftest.py)
 bench:  ## benchmarks; figures go to bench_results/*.json
 	$(PY) -m experiments.bench_powerflow --out bench_results/powerflow.json
 	$(PY) -m experiments.bench_sim --out bench_results/sim.json
+	$(PY) -m experiments.bench_sim --cases ieee39_fidvr ieee300_fidvr --no-andes \
+		--batch-sizes 1 8 64 512 2048 --out bench_results/sim_fidvr.json
 
 clean:
 	rm -rf $(VENV) results bench_results .pytest_cache

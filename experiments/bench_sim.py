@@ -4,15 +4,17 @@
                                     [--devices 1 2] [--out bench_results/sim.json]
 
 Cases: `ieee39` is the PNNL 39-bus file (../shared/cases, motor loads left out), `npcc` the
-140-bus NPCC case that ANDES ships, `ieee300` the PNNL 300-bus file. Each task is a 0.1 s
-bolted fault at 1.0 s on a different bus, 10 s at dt = 5 ms, sampled every 0.1 s (the
-load-shedding control step). For each batch size and device count the batch axis is
+140-bus NPCC case that ANDES ships, `ieee300` the PNNL 300-bus file; `ieee39_fidvr` and
+`ieee300_fidvr` are the built-in study cases with their A/C motors and a load slot per
+action bus, run at the case's step (2 ms / 5 ms). Each task is a 0.1 s bolted fault at
+1.0 s on a different bus, 10 s, sampled every 0.1 s (the load-shedding control step). For each batch size and device count the batch axis is
 sharded over a 1-D mesh of CPU devices (NamedSharding); the first call (compile + run) and
 the best warm call are timed. ANDES runs the same case and fault in the same process.
 
-The models are compiled with no load slots (`CompileOptions(load_buses=())`): these are
+The file cases are compiled with no load slots (`CompileOptions(load_buses=())`): these are
 pure fault rollouts, as ANDES runs them. A load-shedding environment adds one slot per
-controlled load bus, and the network solve grows with the square of the slot count.
+controlled load bus (as the study cases have), and the network solve grows with the square
+of the slot count.
 """
 from __future__ import annotations
 
@@ -34,7 +36,7 @@ import numpy as np  # noqa: E402
 from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
 
 from experiments.andes_reference import run_andes, write_psse_dyr  # noqa: E402
-from jaxgrid import network  # noqa: E402
+from jaxgrid import cases, network  # noqa: E402
 from jaxgrid.compile import CompileOptions, compile_model  # noqa: E402
 from jaxgrid.io.dyr import read_dyr  # noqa: E402
 from jaxgrid.io.raw import read_raw  # noqa: E402
@@ -42,8 +44,9 @@ from jaxgrid.simulate import (FaultEvent, heun_step, make_task, simulate_batch, 
                               stack_tasks)
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "cases"
-T_END, DT, DECIMATION = 10.0, 0.005, 20
-LOAD_BUSES = ()  # no controllable loads: see the module docstring
+T_END, DT, SAMPLE = 10.0, 0.005, 0.1  # s
+LOAD_BUSES = ()  # no controllable loads in the file cases: see the module docstring
+STUDY_CASES = ("ieee39_fidvr", "ieee300_fidvr")
 
 
 def _andes_cases() -> Path:
@@ -67,28 +70,40 @@ def _timed(fn):
     return out, time.perf_counter() - start
 
 
-def step_compile_seconds(model) -> float:
+def step_compile_seconds(model, dt: float) -> float:
     """Seconds to lower and compile one Heun step of `model` (no run)."""
     task = make_task(model, FaultEvent(model.bus_numbers[0], 1.0, 0.1))
     fault = network.fault_view(model.network, task.fault_bus, task.fault_z)
     step = jax.jit(heun_step, static_argnames=("dt",))
     start = time.perf_counter()
-    step.lower(model, model.initial, np.float32(0.0), dt=DT, task=task, fault=fault).compile()
+    step.lower(model, model.initial, np.float32(0.0), dt=dt, task=task, fault=fault).compile()
     return time.perf_counter() - start
 
 
-def bench_case(name: str, batch_sizes, device_counts, repeats: int, with_andes: bool) -> dict:
+def load_case(name: str):
+    """(model, dt s, (raw, dyr) files for ANDES or None) of a benchmark case."""
+    if name in STUDY_CASES:
+        study = cases.load(name)
+        return study.compile(), study.dt, None
     raw_fn, dyr_fn, drop = CASES[name]
     folder = tempfile.mkdtemp()
     dyr = write_psse_dyr(str(dyr_fn()), os.path.join(folder, f"{name}.dyr"), drop)
     raw = str(raw_fn())
-    start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = compile_model(read_raw(raw), read_dyr(dyr), CompileOptions(strict=False, load_buses=LOAD_BUSES))
+        model = compile_model(read_raw(raw), read_dyr(dyr),
+                              CompileOptions(strict=False, load_buses=LOAD_BUSES))
+    return model, DT, (raw, dyr)
+
+
+def bench_case(name: str, batch_sizes, device_counts, repeats: int, with_andes: bool) -> dict:
+    start = time.perf_counter()
+    model, dt, files = load_case(name)
+    decimation = int(round(SAMPLE / dt))
     result = {"case": name, "n_bus": model.n_bus, "n_gen": model.n_gen,
-              "n_slot": len(model.slot_bus), "model_compile_s": round(time.perf_counter() - start, 3),
-              "step_compile_s": round(step_compile_seconds(model), 3), "runs": []}
+              "n_slot": len(model.slot_bus), "n_motor": sum(len(g.index) for g in model.loads),
+              "dt_s": dt, "model_compile_s": round(time.perf_counter() - start, 3),
+              "step_compile_s": round(step_compile_seconds(model, dt), 3), "runs": []}
     # fault buses: the machines' buses excluded, cycling over the rest
     candidates = [b for b in model.bus_numbers if b > 0 and b not in model.gen_bus]
     for n_dev in device_counts:
@@ -100,7 +115,7 @@ def bench_case(name: str, batch_sizes, device_counts, repeats: int, with_andes: 
             tasks = stack_tasks([make_task(model, FaultEvent(candidates[k % len(candidates)],
                                                              1.0, 0.1)) for k in range(batch)])
             tasks = jax.device_put(tasks, NamedSharding(mesh, PartitionSpec("batch")))
-            run = lambda: simulate_batch(model, tasks, T_END, DT, DECIMATION)  # noqa: E731
+            run = lambda: simulate_batch(model, tasks, T_END, dt, decimation)  # noqa: E731
             out, first = _timed(run)
             warm = min(_timed(run)[1] for _ in range(repeats))
             row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
@@ -109,9 +124,9 @@ def bench_case(name: str, batch_sizes, device_counts, repeats: int, with_andes: 
                    "diverged": int(np.sum(np.asarray(out.diverged)))}
             print(name, row, flush=True)
             result["runs"].append(row)
-    if with_andes:
+    if with_andes and files:
         try:
-            ref = run_andes(raw, dyr, T_END, candidates[0], 1.0, 0.1, tstep=DT)
+            ref = run_andes(*files, T_END, candidates[0], 1.0, 0.1, tstep=dt)
         except Exception as err:  # ANDES reads PSS/E v33 layouts only; report, go on
             result["andes_error"] = f"{type(err).__name__}: {err}"
             print(name, "ANDES could not run:", result["andes_error"], flush=True)
@@ -129,7 +144,8 @@ def bench_case(name: str, batch_sizes, device_counts, repeats: int, with_andes: 
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--cases", nargs="*", default=["ieee39", "npcc"], choices=list(CASES))
+    parser.add_argument("--cases", nargs="*", default=["ieee39", "npcc"],
+                        choices=list(CASES) + list(STUDY_CASES))
     parser.add_argument("--batch-sizes", nargs="*", type=int, default=[1, 4, 16, 64, 256, 1024])
     parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
     parser.add_argument("--repeats", type=int, default=2)
@@ -138,8 +154,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     report = {"machine": platform.processor() or platform.machine(),
               "jax": jax.__version__, "backend": jax.default_backend(),
-              "devices": len(jax.devices()), "t_end_s": T_END, "dt_s": DT,
-              "sample_every_s": DT * DECIMATION,
+              "devices": len(jax.devices()), "t_end_s": T_END, "sample_every_s": SAMPLE,
               "cases": [bench_case(c, args.batch_sizes, args.devices, args.repeats,
                                    not args.no_andes) for c in args.cases]}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

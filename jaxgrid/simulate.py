@@ -286,6 +286,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--lenient", action="store_true",
                    help="drop unsupported dynamic models (with a warning) instead of failing")
     p.add_argument("--float64", action="store_true", help="run the time loop in float64")
+    p.add_argument("--motor-share", default="psse_load_record",
+                   help="load an ACMTBLU1 motor represents: psse_load_record (default), "
+                        "interpss_bus_total (the original study's simulator) or fraction:X")
+    p.add_argument("--vx-rule", default="reference_running1",
+                   choices=["reference_running1", "spec_running2"],
+                   help="ACMTBLU1 stall-jump voltage rule (default: the original study's)")
     p.add_argument("--out", required=True, help="output .npz")
     return p
 
@@ -295,14 +301,20 @@ def main(argv: list[str] | None = None) -> int:
     from jaxgrid.compile import CompileOptions, compile_model
     from jaxgrid.io.dyr import DyrError, read_dyr
     from jaxgrid.io.raw import read_raw
+    from jaxgrid.models.acmotor import MotorOptions
     from jaxgrid.models.base import ModelError
 
     args = _parser().parse_args(argv)
     try:
         case = read_raw(args.raw)
         options = CompileOptions(strict=not args.lenient,
+                                 motors=MotorOptions(share_mode=args.motor_share,
+                                                     vx_rule=args.vx_rule),
                                  precision="float64" if args.float64 else "float32")
         model = compile_model(case, read_dyr(args.dyr), options)
+        for note in model.notes:
+            if note.startswith("load report: "):
+                print(note)
         fault = None if args.fault_bus is None else FaultEvent(
             args.fault_bus, args.fault_start, args.fault_duration, args.fault_r, args.fault_x)
         traj = simulate(model, args.t_end, args.dt, fault=fault, decimation=args.decimation)

@@ -24,7 +24,8 @@ from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.models.acmotor import Acmtblu1, MotorOptions
 from jaxgrid.models.base import ModelError
-from jaxgrid.simulate import FaultEvent, make_task, shed, simulate, simulate_batch, stack_tasks
+from jaxgrid.simulate import (FaultEvent, main, make_task, shed, simulate, simulate_batch,
+                              stack_tasks)
 
 DT = 0.002  # s, the PNNL 39-bus step
 # The PNNL 39-bus ACMTBLU1 CONs (IEEE39bus_3AC.dyr), in CON order.
@@ -259,3 +260,19 @@ def test_motor_options_reject_unknown_readings():
         MotorOptions(share_mode="fraction:1.5")
     with pytest.raises(ValueError, match="vx_rule"):
         MotorOptions(vx_rule="running3")
+
+
+def test_cli_motor_readings_and_load_report(tmp_path, capsys):
+    raw, dyr = write_system(tmp_path)
+    out = str(tmp_path / "run.npz")
+    common = ["--raw", str(raw), "--dyr", str(dyr), "--t-end", "0.2", "--dt", "0.002",
+              "--decimation", "10", "--out", out]
+    assert main(common + ["--motor-share", "fraction:0.43", "--vx-rule", "spec_running2"]) == 0
+    printed = capsys.readouterr().out
+    # GridPACK's reading: 43 % of the 100 MW record; the running-2 rule caps Vx at Vstall'.
+    assert "ACMTBLU1 at bus 2 id '2': 43.00 MW motor (fraction:0.43)" in printed
+    assert "Vx = 0.5000 p.u. (spec_running2)" in printed
+    assert main(common + ["--motor-share", "interpss_bus_total"]) == 0
+    assert "150.00 MW motor (interpss_bus_total)" in capsys.readouterr().out
+    assert main(common + ["--motor-share", "half"]) == 2
+    assert "share_mode = 'half': allowed" in capsys.readouterr().err

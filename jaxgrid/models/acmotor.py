@@ -371,3 +371,17 @@ def _fix_contactor(p, notes: list[str], site: LoadSite) -> None:
 
 
 LOAD_MOTORS = {"ACMTBLU1": Acmtblu1}
+
+
+def motor_status(p, z):
+    """(running, stalled, off) shares of each motor's initial population, arrays (..., n).
+
+    off: tripped by thermal protection or UV relays, or dropped by contactors; a shed
+    share is not counted (see GridState.load_left). Works on NumPy and jnp arrays, e.g.
+    on sampled flags (n_t, n) with parameters (n,).
+    """
+    connected = z["kuv"] * z["kcon"]
+    part_a, part_b = (1.0 - p["frst"]) * z["fth_a"], p["frst"] * z["fth_b"]
+    running = connected * (part_a * z["run_a"] + part_b * z["run_b"])
+    stalled = connected * (part_a * (1.0 - z["run_a"]) + part_b * (1.0 - z["run_b"]))
+    return running, stalled, 1.0 - running - stalled
