@@ -349,6 +349,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         case = read_raw(args.raw) if args.raw else cases.load(args.case)
+        if isinstance(case, cases.StudyCase):
+            case = case.case  # the study's network
     except (CaseError, ValueError, OSError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

@@ -17,6 +17,7 @@ MATPOWER's, not the PNNL file's (which differ, e.g. 114.6 vs 84 Mvar at bus 7).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 
 from jaxgrid.case import PQ, Case, build_case, to_rows
 from jaxgrid.cases import register
@@ -27,12 +28,14 @@ STEP_DOWN_X = 0.003  # p.u. on the system base, as in the PNNL "smallX" file
 LOAD_SPLIT = (0.4, 0.4, 0.2)
 
 
-def move_loads_behind_transformers(case: Case, buses, offset: int, x: float,
-                                   split=LOAD_SPLIT) -> Case:
+def move_loads_behind_transformers(case: Case, buses, offset: int,
+                                   x: float | Mapping[int, float], split=LOAD_SPLIT) -> Case:
     """Move each bus's loads onto a new bus `offset + bus` behind a transformer of reactance x.
 
-    The moved load is split into len(split) records with IDs "1", "2", ...
-    (fractions of the bus total). Returns a new validated case.
+    `x` is p.u. on the system base: one value for every transformer, or a mapping from the
+    original bus number to its transformer's reactance. The moved load is split into
+    len(split) records with IDs "1", "2", ... (fractions of the bus total). Returns a new
+    validated case.
     """
     rows = to_rows(case)
     by_number = {row["number"]: row for row in rows["buses"]}
@@ -51,7 +54,8 @@ def move_loads_behind_transformers(case: Case, buses, offset: int, x: float,
             kept_loads.append(dict(at_bus[0], bus=new, load_id=str(k),
                                    **{key: value * share for key, value in total.items()}))
         rows["branches"].append(dict(
-            from_bus=bus, to_bus=new, ckt="1", in_service=True, r=0.0, x=x, b=0.0, tap=1.0,
+            from_bus=bus, to_bus=new, ckt="1", in_service=True, r=0.0,
+            x=x[bus] if isinstance(x, Mapping) else x, b=0.0, tap=1.0,
             shift=0.0, g_from=0.0, b_from=0.0, g_to=0.0, b_to=0.0, is_transformer=True,
             line=0))
     rows["loads"] = [ld for ld in rows["loads"] if ld["bus"] not in buses] + kept_loads

@@ -70,14 +70,6 @@ class GovernorModel(DeviceModel):
         raise NotImplementedError
 
     @classmethod
-    def init_violations(cls, p: Params, x: States) -> dict[str, Array]:
-        """{variable: bool (n,)}: units whose initial value lies outside its limits.
-
-        By default the states outside their non-windup `limits`.
-        """
-        return {name: _outside(x[name], lo, hi) for name, (lo, hi) in cls.limits(p).items()}
-
-    @classmethod
     def notes(cls, p: dict[str, np.ndarray]) -> list[str]:
         """Warn-level remarks on the data (nothing by default)."""
         return []
