@@ -23,14 +23,15 @@ from jaxgrid.dynamics import derivatives, update_loads
 from jaxgrid.grid import DeviceGroup, GridModel, GridState
 from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
 from jaxgrid.models.acmotor import LOAD_MOTORS, MotorOptions
-from jaxgrid.models.base import ExciterInputs, LoadSite, ModelError
+from jaxgrid.models.base import ExciterInputs, LoadSite, ModelError, device_label
 from jaxgrid.models.exciters import EXCITERS
 from jaxgrid.models.governors import GOVERNORS
+from jaxgrid.models.induction import INDUCTION_MOTORS
 from jaxgrid.models.loads import LoadSplit, split_bus_loads
 from jaxgrid.models.machines import MACHINES
 from jaxgrid.powerflow import PowerFlowResult, admittance_matrix, bus_loads, solve
 
-LOAD_MODELS = dict(LOAD_MOTORS)
+LOAD_MODELS = {**LOAD_MOTORS, **INDUCTION_MOTORS}
 SUPPORTED = tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS) + tuple(LOAD_MODELS)
 
 # What replaces a model that is not supported, by kind (lenient mode).
@@ -344,7 +345,7 @@ def _load_model_groups(case, pf, records, load_keys, options, notes):
             continue
         units = np.array([load_keys[_key(r)] for r in rs])
         buses = loads.bus[units]
-        labels = tuple(f"{name} at bus {r.bus} id '{r.device_id}'" for r in rs)
+        labels = tuple(device_label(r) for r in rs)
         site = LoadSite(v0=pf.vm[buses] * np.exp(1j * pf.va[buses]), record_p=record_p[units],
                         bus_p=bus_p[buses], sbase=case.base_mva, f_nom=case.frequency_hz,
                         labels=labels)
