@@ -518,16 +518,9 @@ def test_jit_vmap_and_float32(tmp_path):
 
 
 # --------------------------------------------------------------------------- #
-# 8. Whole simulator (runs once compile.py lists the induction motors)
+# 8. Whole simulator
 # --------------------------------------------------------------------------- #
 
-def _compile_supports_motors() -> bool:
-    from jaxgrid import compile as compiler
-    return all(name in compiler.SUPPORTED for name in INDUCTION_MOTORS)
-
-
-@pytest.mark.skipif(not _compile_supports_motors(),
-                    reason="jaxgrid.compile does not list CIM5BL/CIM6BL yet")
 def test_flat_run_with_motor_loads(tmp_path):
     """Kundur's two loads as a double-cage CIM5BL and a single-cage CIM6BL: a 2 s run with
     no event stays at the power flow (float32 time loop)."""
