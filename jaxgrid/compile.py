@@ -169,7 +169,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
         network=network.build(y, slot_bus, np.complex128),
         z_source=z_source, y_norton=y_norton, mbase_ratio=ratio, efd0=efd0, pm0=pm0,
         load_y=y_z[load_bus], load_s_i=s_i[load_bus], load_s_p=s_p[load_bus],
-        load_vm0=np.maximum(pf.vm[load_bus], 1e-6), v0=v0,
+        load_vm0=np.maximum(pf.vm[load_bus], 1e-6), load_p0=s_load[load_bus].real, v0=v0,
         initial=GridState(machines=tuple(m_states), exciters=e_states, governors=g_states,
                           loads=tuple(m[4] for m in motors),
                           load_flags=tuple(m[5] for m in motors),

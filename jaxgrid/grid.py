@@ -81,6 +81,8 @@ class GridModel:
         exciter or governor, p.u. MBASE.
       load_y, load_s_i, load_s_p: (n_load,) complex ZIP parts at the load slots (p.u.).
       load_vm0: (n_load,) power-flow voltage magnitude at the load slots, p.u.
+      load_p0: (n_load,) initial active power of all loads at each load slot (static and
+        motors), p.u. system base: what shedding a fraction of the slot removes.
       v0: (n_bus,) complex power-flow bus voltages, p.u.
       initial: GridState at the power-flow point.
       bus_numbers: RAW bus numbers (n_bus,), static.  gen_bus, gen_id: static per machine.
@@ -106,6 +108,7 @@ class GridModel:
     load_s_i: np.ndarray
     load_s_p: np.ndarray
     load_vm0: np.ndarray
+    load_p0: np.ndarray
     v0: np.ndarray
     initial: GridState
     bus_numbers: tuple[int, ...] = struct.field(pytree_node=False)

@@ -203,6 +203,48 @@ def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: net
             x.load_left, x.load_flags)
 
 
+@struct.dataclass
+class Health:
+    """Divergence bookkeeping carried through a rollout.
+
+    Attributes:
+      diverged: () bool.  diverged_at: () s, inf while healthy.
+      residual: () largest network fixed-point residual since it was last reset, p.u.
+    """
+
+    diverged: jnp.ndarray
+    diverged_at: jnp.ndarray
+    residual: jnp.ndarray
+
+
+def healthy(real) -> Health:
+    """A Health record of a rollout that has not diverged."""
+    return Health(jnp.zeros((), bool), jnp.asarray(jnp.inf, real), jnp.zeros((), real))
+
+
+def advance(model: GridModel, x: GridState, health: Health, first_step, n: int, dt: float,
+            task: Task, fault: network.Fault, bounds: Bounds):
+    """n Heun steps from step index `first_step` (traced int); (state, health) after them.
+
+    A step that leaves `bounds` (or is non-finite) freezes the state and flags divergence.
+    """
+    real = jnp.real(model.network.z_ss).dtype
+
+    def step(carry, k):
+        x, h = carry
+        t = k.astype(real) * dt
+        new, r = heun_step(model, x, t, dt, task, fault)
+        bad = ~within_bounds(new, bounds) & ~h.diverged
+        keep = h.diverged | bad
+        x = jax.tree.map(lambda old, nw: jnp.where(keep, old, nw), x, new)
+        h = Health(h.diverged | bad, jnp.where(bad, t + dt, h.diverged_at),
+                   jnp.maximum(h.residual, r))
+        return (x, h), None
+
+    (x, health), _ = jax.lax.scan(step, (x, health), first_step + jnp.arange(n))
+    return x, health
+
+
 @partial(jax.jit, static_argnames=("n_samples", "decimation", "dt", "bounds"))
 def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: float,
             bounds: Bounds = Bounds()) -> Trajectory:
@@ -210,34 +252,23 @@ def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: f
     fault = network.fault_view(model.network, task.fault_bus, task.fault_z)
     real = jnp.real(model.network.z_ss).dtype
 
-    def step(carry, n):
-        x, diverged, diverged_at, residual = carry
-        t = n.astype(real) * dt
-        new, r = heun_step(model, x, t, dt, task, fault)
-        bad = ~within_bounds(new, bounds) & ~diverged
-        keep = diverged | bad
-        x = jax.tree.map(lambda old, nw: jnp.where(keep, old, nw), x, new)
-        diverged_at = jnp.where(bad, t + dt, diverged_at)
-        return (x, diverged | bad, diverged_at, jnp.maximum(residual, r)), None
-
     def sample(carry, k):
-        x, diverged, diverged_at, _ = carry
+        x, h = carry
         n0 = k * decimation
-        carry, _ = jax.lax.scan(step, (x, diverged, diverged_at, jnp.zeros((), real)),
-                                n0 + jnp.arange(decimation))
+        x, h = advance(model, x, h.replace(residual=jnp.zeros((), real)), n0, decimation, dt,
+                       task, fault, bounds)
         t = (n0 + decimation).astype(real) * dt
-        return carry, observe(model, carry[0], t, dt, task, fault) + (carry[3],)
+        return (x, h), observe(model, x, t, dt, task, fault) + (h.residual,)
 
     x0 = model.initial
     first = observe(model, x0, jnp.zeros((), real), dt, task, fault) + (jnp.zeros((), real),)
-    init = (x0, jnp.zeros((), bool), jnp.asarray(jnp.inf, real), jnp.zeros((), real))
-    (x, diverged, diverged_at, _), samples = jax.lax.scan(sample, init, jnp.arange(n_samples))
+    (x, health), samples = jax.lax.scan(sample, (x0, healthy(real)), jnp.arange(n_samples))
     vm, va, speed, angle, left, flags, residual = jax.tree.map(
         lambda f, s: jnp.concatenate([f[None], s]), first, samples)
     t = jnp.arange(n_samples + 1, dtype=real) * (decimation * dt)
     return Trajectory(t=t, vm=vm, va=va, speed_dev=speed, angle=angle, residual=residual,
-                      load_left=left, load_flags=flags,
-                      diverged=diverged, diverged_at=diverged_at, final=x)
+                      load_left=left, load_flags=flags, diverged=health.diverged,
+                      diverged_at=health.diverged_at, final=x)
 
 
 def _samples(t_end: float, dt: float, decimation: int) -> int:

@@ -1,0 +1,264 @@
+"""The FIDVR load-shedding environment of the PNNL PARS study, functional and jittable.
+
+    env = LoadSheddingEnv(model, EnvConfig.for_study(study))
+    obs, state = env.reset(key, task, params)
+    obs, state, reward, done, info = env.step(state, action, params)
+
+Every agent step (0.1 s) the action sheds, per action bus, a fraction of its initial load
+(in [-0.2, 0], negative sheds, clipped to what remains); the grid then runs for one agent
+step of simulation steps. The observation is the voltage magnitude at the observed buses
+and the remaining load fraction at the action buses, optionally the last k of them stacked.
+The reward per step is
+
+    c1·Σ_i ΔV_i − c2·Σ_j ΔP_j − c3·n_invalid − c_pre·n_prefault,
+
+ΔV_i = min(V_i − V_env(t), 0) against the recovery envelope (`jaxgrid.recovery`), ΔP_j the
+load shed this step in p.u. of the system base; an episode that still has a voltage of the
+recovery-check set below the recovery level after the recovery time (or diverges) earns −M
+and ends (`terminated`); reaching the episode length ends it too (`truncated`). Each term
+is a named function below. `EnvConfig` is structure (static), `EnvParams` values (traced).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from jaxgrid import network
+from jaxgrid.grid import GridModel, GridState
+from jaxgrid.recovery import envelope
+from jaxgrid.simulate import Bounds, Health, Task, advance, healthy, observe
+
+
+@struct.dataclass
+class EnvParams:
+    """Reward and action values of the task (defaults: the study's 39-bus task).
+
+    Attributes:
+      c_voltage: c1, weight of the envelope deviation (p.u. of voltage).
+      c_shed: c2, weight of the load shed per step (p.u. of the system base).
+      c_invalid: c3, penalty per shedding request at an empty action bus.
+      c_prefault: penalty per shedding request before the fault.
+      unstable_penalty: M, the reward of the step that fails recovery or diverges.
+      recovery_level: p.u. voltage the recovery-check set must reach ...
+      recovery_time: ... this many seconds after clearing.
+      action_low, action_high: the action range (fraction of the initial load per step).
+    """
+
+    c_voltage: float = 260.0
+    c_shed: float = 150.0
+    c_invalid: float = 3.0
+    c_prefault: float = 100.0
+    unstable_penalty: float = 1000.0
+    recovery_level: float = 0.95
+    recovery_time: float = 4.0
+    action_low: float = -0.2
+    action_high: float = 0.0
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvConfig:
+    """Structure of the task (static).
+
+    Attributes:
+      observed_buses, action_buses: RAW bus numbers.
+      dt: simulation step, s.  agent_dt: control step, s.  episode: length, s.
+      history: number of last observations stacked (1: just the current one).
+      bounds: divergence bounds of the simulation.
+    """
+
+    observed_buses: tuple[int, ...]
+    action_buses: tuple[int, ...]
+    dt: float = 0.002
+    agent_dt: float = 0.1
+    episode: float = 10.0
+    history: int = 1
+    bounds: Bounds = Bounds()
+
+    def __post_init__(self):
+        ratio = self.agent_dt / self.dt
+        if not (self.dt > 0 and abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
+            raise ValueError(f"agent_dt = {self.agent_dt} s must be a whole number of "
+                             f"simulation steps dt = {self.dt} s")
+        if not isinstance(self.history, int) or self.history < 1:
+            raise ValueError(f"history = {self.history!r}: must be an int >= 1")
+        if not self.episode >= self.agent_dt:
+            raise ValueError(f"episode = {self.episode} s: must be >= agent_dt")
+
+    @property
+    def sim_steps(self) -> int:
+        """Simulation steps per agent step."""
+        return int(round(self.agent_dt / self.dt))
+
+    @property
+    def n_steps(self) -> int:
+        """Agent steps per episode."""
+        return int(round(self.episode / self.agent_dt))
+
+    @classmethod
+    def for_study(cls, study, **overrides) -> EnvConfig:
+        """The configuration of a built-in `StudyCase` (its buses and step)."""
+        return cls(observed_buses=study.observed_buses, action_buses=study.action_buses,
+                   dt=study.dt, **overrides)
+
+
+@struct.dataclass
+class EnvState:
+    """One episode's state.
+
+    Attributes:
+      grid: the simulator state.  health: divergence flags of the simulation.
+      task: the episode's disturbance.  step: () int agent steps taken.
+      history: (history, n_obs) the last observations, newest last.
+      recovery_check: (n_observed,) bool buses that must recover (at or above the recovery
+        level before the fault).
+      done: () bool.
+    """
+
+    grid: GridState
+    health: Health
+    task: Task
+    step: jnp.ndarray
+    history: jnp.ndarray
+    recovery_check: jnp.ndarray
+    done: jnp.ndarray
+
+
+# --------------------------------------------------------------------------- #
+# Reward terms (each checked by hand in tests/test_env.py)
+# --------------------------------------------------------------------------- #
+
+def envelope_deviation(vm, t_after_clearing):
+    """Σ_i min(V_i − V_env, 0) (p.u., <= 0) of voltages vm (n,) at t_after_clearing (s).
+
+    Zero before clearing (no envelope applies).
+    """
+    level = envelope(t_after_clearing, jnp)
+    return jnp.where(jnp.isnan(level), 0.0, jnp.sum(jnp.minimum(vm - level, 0.0)))
+
+
+def shed_power(amount, p0):
+    """Σ_j load shed this step, p.u. system base: fractions amount (n,) of initial loads p0."""
+    return jnp.sum(amount * p0)
+
+
+def invalid_requests(request, left_before):
+    """Number of action buses asked to shed (request > 0) with nothing left there."""
+    return jnp.sum((request > 0) & (left_before <= 0))
+
+
+def prefault_requests(request, t, fault_start):
+    """Number of action buses asked to shed before the fault (t < fault_start, s)."""
+    return jnp.sum(request > 0) * (t < fault_start)
+
+
+def recovery_failed(vm, check, t_after_clearing, params: EnvParams):
+    """() bool: after the recovery time, a checked voltage is still below the level."""
+    late = t_after_clearing > params.recovery_time
+    return late & jnp.any(check & (vm < params.recovery_level))
+
+
+# --------------------------------------------------------------------------- #
+# The environment
+# --------------------------------------------------------------------------- #
+
+class LoadSheddingEnv:
+    """Structure (model, bus indices, step counts); `reset`/`step`/`rollout` are pure."""
+
+    def __init__(self, model: GridModel, config: EnvConfig):
+        with jax.enable_x64(model.precision == "float64"):
+            self.model = jax.tree.map(jnp.asarray, model)  # constants of the compiled step
+        self.config = config
+        self.observed = np.array([model.bus_index(b) for b in config.observed_buses])
+        self.action_slots = np.array([model.load_slot(b) for b in config.action_buses])
+
+    @property
+    def obs_size(self) -> int:
+        """Length of one observation (before stacking)."""
+        return len(self.observed) + len(self.action_slots)
+
+    def _observe(self, grid: GridState, t, task: Task, fault):
+        vm = observe(self.model, grid, t, self.config.dt, task, fault)[0][self.observed]
+        return vm, jnp.concatenate([vm, grid.load_left[self.action_slots]])
+
+    def _fault(self, task: Task):
+        return network.fault_view(self.model.network, task.fault_bus, task.fault_z)
+
+    def reset(self, key, task: Task, params: EnvParams):
+        """(obs (history·n_obs,), state) at t = 0; `key` is unused (the grid is deterministic)."""
+        del key
+        grid = self.model.initial
+        real = jnp.real(self.model.network.z_ss).dtype
+        vm, obs = self._observe(grid, jnp.zeros((), real), task, self._fault(task))
+        history = jnp.tile(obs, (self.config.history, 1))
+        state = EnvState(grid=grid, health=healthy(real), task=task,
+                         step=jnp.zeros((), jnp.int32), history=history,
+                         recovery_check=vm >= params.recovery_level, done=jnp.zeros((), bool))
+        return history.reshape(-1), state
+
+    def step(self, state: EnvState, action, params: EnvParams):
+        """(obs, state, reward, done, info) after one agent step with `action` (n_action,)."""
+        cfg, task = self.config, state.task
+        real = jnp.real(self.model.network.z_ss).dtype
+        t = state.step.astype(real) * cfg.agent_dt
+        request = -jnp.clip(action, params.action_low, params.action_high)  # >= 0
+        left = state.grid.load_left[self.action_slots]
+        amount = jnp.minimum(request, left)
+        grid = state.grid.replace(load_left=state.grid.load_left.at[self.action_slots].add(-amount))
+        fault = self._fault(task)
+        grid, health = advance(self.model, grid, state.health, state.step * cfg.sim_steps,
+                               cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
+        t_next = t + cfg.agent_dt
+        vm, obs = self._observe(grid, t_next, task, fault)
+        after = t_next - task.fault_end
+        failed = recovery_failed(vm, state.recovery_check, after, params) | health.diverged
+        reward = (params.c_voltage * envelope_deviation(vm, after)
+                  - params.c_shed * shed_power(amount, self.model.load_p0[self.action_slots])
+                  - params.c_invalid * invalid_requests(request, left)
+                  - params.c_prefault * prefault_requests(request, t, task.fault_start))
+        reward = jnp.where(failed, -params.unstable_penalty, reward)
+        truncated = state.step + 1 >= cfg.n_steps
+        done = failed | truncated
+        history = jnp.concatenate([state.history[1:], obs[None]])
+        new = EnvState(grid=grid, health=health, task=task, step=state.step + 1,
+                       history=history, recovery_check=state.recovery_check, done=done)
+        info = {"terminated": failed, "truncated": truncated & ~failed,
+                "shed_pu": shed_power(amount, self.model.load_p0[self.action_slots]),
+                "diverged": health.diverged}
+        return history.reshape(-1), new, reward, done, info
+
+    def rollout(self, policy_apply, policy_params, tasks: Task, params: EnvParams,
+                policy_carry=None):
+        """Whole episodes of a batch of tasks (leading axis), vmapped, each in `lax.scan`.
+
+        policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
+        initial recurrent state (None for feed-forward policies). Reward stops after `done`.
+        Returns {"reward": (batch,), "shed_pu": (batch,), "recovered": (batch,) bool,
+        "steps": (batch,) agent steps taken, "diverged": (batch,) bool}.
+        """
+
+        def episode(task):
+            obs, state = self.reset(None, task, params)
+
+            def step(carry, _):
+                obs, state, policy_state, total, shed, failed = carry
+                action, policy_state = policy_apply(policy_params, obs, policy_state)
+                live = ~state.done
+                obs, new, reward, _, info = self.step(state, action, params)
+                new = jax.tree.map(lambda a, b: jnp.where(live, a, b), new, state)
+                total = total + jnp.where(live, reward, 0.0)
+                shed = shed + jnp.where(live, info["shed_pu"], 0.0)
+                failed = failed | (live & info["terminated"])
+                return (obs, new, policy_state, total, shed, failed), None
+
+            zero = jnp.zeros((), obs.dtype)
+            init = (obs, state, policy_carry, zero, zero, jnp.zeros((), bool))
+            (_, state, _, total, shed, failed), _ = jax.lax.scan(
+                step, init, None, length=self.config.n_steps)
+            return {"reward": total, "shed_pu": shed, "recovered": ~failed,
+                    "steps": state.step, "diverged": state.health.diverged}
+
+        return jax.vmap(episode)(tasks)

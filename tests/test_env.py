@@ -1,0 +1,120 @@
+"""The load-shedding environment: each reward term by hand, then whole steps and episodes.
+
+Episodes run on the built-in ieee39_fidvr case, shortened to 6 s (the fault at 1 s and the
+4 s recovery check still fit), with one compiled rollout shared by the tests.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxgrid import cases
+from jaxgrid.env import (EnvConfig, EnvParams, LoadSheddingEnv, envelope_deviation,
+                         invalid_requests, prefault_requests, recovery_failed, shed_power)
+from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
+
+
+@pytest.mark.parametrize("t_after, expected", [
+    (-0.1, 0.0),   # before clearing: no envelope
+    (0.2, 0.0),    # 0.7 p.u.: all above
+    (0.33, 0.0),   # (0, 0.33] is still 0.7
+    (0.4, -0.05),  # 0.8: 0.75 is 0.05 short
+    (1.0, -0.20),  # 0.9: 0.15 + 0.05 short
+    (2.0, -0.30),  # 0.95: 0.20 + 0.10 short, 0.96 fine
+])
+def test_envelope_deviation_by_hand(t_after, expected):
+    vm = jnp.array([0.75, 0.85, 0.96])
+    assert float(envelope_deviation(vm, t_after)) == pytest.approx(expected, abs=1e-6)
+
+
+def test_shed_invalid_and_prefault_terms_by_hand():
+    request = jnp.array([0.2, 0.0, 0.1])
+    assert float(shed_power(jnp.array([0.2, 0.1, 0.0]), jnp.array([5.0, 3.0, 2.0]))) == \
+        pytest.approx(1.3)
+    assert int(invalid_requests(request, jnp.array([0.0, 0.0, 0.5]))) == 1
+    assert int(prefault_requests(request, 0.5, 1.0)) == 2
+    assert int(prefault_requests(request, 1.5, 1.0)) == 0
+
+
+def test_recovery_check_by_hand():
+    params = EnvParams()
+    vm = jnp.array([0.94, 0.96])
+    both = jnp.array([True, True])
+    assert bool(recovery_failed(vm, both, 4.1, params))
+    assert not bool(recovery_failed(vm, both, 3.9, params)), "too early to judge"
+    assert not bool(recovery_failed(vm, jnp.array([False, True]), 4.1, params)), \
+        "a bus that started below the level is not checked"
+
+
+@pytest.fixture(scope="module")
+def env():
+    study = cases.load("ieee39_fidvr")
+    return LoadSheddingEnv(study.compile(), EnvConfig.for_study(study, episode=6.0))
+
+
+@pytest.fixture(scope="module")
+def tasks(env):
+    """[no fault, bus-4 0.02 s (recovers), bus-4 0.08 s (FIDVR)]."""
+    faults = [None, FaultEvent(4, 1.0, 0.02), FaultEvent(4, 1.0, 0.08)]
+    return [make_task(env.model, f) for f in faults]
+
+
+def test_pre_fault_shedding_step_by_hand(env, tasks):
+    params = EnvParams()
+    step = jax.jit(env.step)
+    obs, state = env.reset(None, tasks[2], params)
+    assert obs.shape == (env.obs_size,)
+    action = jnp.array([-0.2, 0.0, 0.0])  # shed 20 % at 504, before the fault
+    p0 = float(env.model.load_p0[env.action_slots[0]])
+    obs, state, reward, done, info = step(state, action, params)
+    assert float(reward) == pytest.approx(-150.0 * 0.2 * p0 - 100.0, rel=1e-5)
+    assert float(obs[-3]) == pytest.approx(0.8) and not bool(done)
+    empty = state.replace(grid=state.grid.replace(
+        load_left=state.grid.load_left.at[env.action_slots[0]].set(0.0)))
+    _, _, reward, _, info = step(empty, action, params)
+    assert float(reward) == pytest.approx(-3.0 - 100.0, rel=1e-6), "invalid + pre-fault only"
+    assert float(info["shed_pu"]) == 0.0
+
+
+def zero_policy(params, obs, carry):
+    return jnp.zeros(3), carry
+
+
+def shed_after_fault(params, obs, carry):
+    """Shed 20 % at every action bus on the first step after 1.1 s, once (carry: step count)."""
+    return jnp.where(carry == 11, -0.2, 0.0) * jnp.ones(3), carry + 1
+
+
+@pytest.fixture(scope="module")
+def episodes(env, tasks):
+    run = jax.jit(env.rollout, static_argnums=0)
+    batch = stack_tasks(tasks)
+    return {name: run(policy, None, batch, EnvParams(), jnp.zeros((3,), jnp.int32))
+            for name, policy in (("none", zero_policy), ("shed", shed_after_fault))}, run
+
+
+def test_uncontrolled_fidvr_fails_recovery_mild_fault_does_not(episodes):
+    out = episodes[0]["none"]
+    print("\nrewards without control:", np.asarray(out["reward"]).round(1))
+    assert np.asarray(out["recovered"]).tolist() == [True, True, False]
+    assert float(out["reward"][0]) == pytest.approx(0.0, abs=1e-6), "nothing to pay at rest"
+    assert float(out["reward"][2]) <= -1000.0, "the failed episode earns -M"
+    assert int(out["steps"][2]) < int(out["steps"][0]) == 60, "failure ends the episode"
+
+
+def test_shedding_policy_is_charged_for_the_load(episodes, env):
+    out = episodes[0]["shed"]
+    expected = 0.2 * float(np.sum(np.asarray(env.model.load_p0)[env.action_slots]))
+    assert np.asarray(out["shed_pu"]) == pytest.approx([expected] * 3, rel=1e-5)
+
+
+def test_vmap_equals_one_at_a_time(episodes, tasks):
+    batched, run = episodes
+    for k, task in enumerate(tasks):
+        one = run(shed_after_fault, None, stack_tasks([task]), EnvParams(),
+                  jnp.zeros((1, 3), jnp.int32)[0])
+        for key in ("reward", "shed_pu", "steps"):
+            assert float(one[key][0]) == pytest.approx(float(batched["shed"][key][k]),
+                                                       rel=1e-5, abs=1e-4), key
