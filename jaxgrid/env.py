@@ -231,14 +231,17 @@ class LoadSheddingEnv:
         return history.reshape(-1), new, reward, done, info
 
     def rollout(self, policy_apply, policy_params, tasks: Task, params: EnvParams,
-                policy_carry=None):
+                policy_carry=None, trace: bool = False):
         """Whole episodes of a batch of tasks (leading axis), vmapped, each in `lax.scan`.
 
         policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
         initial recurrent state (None for feed-forward policies). Reward stops after `done`.
         Returns {"reward": (batch,), "shed_pu": (batch,), "recovered": (batch,) bool,
-        "steps": (batch,) agent steps taken, "diverged": (batch,) bool}.
+        "steps": (batch,) agent steps taken, "diverged": (batch,) bool}; with `trace`
+        (static) also per agent step "vm" (batch, n_steps, n_observed) p.u. and
+        "shed_step_pu" (batch, n_steps), frozen after the episode ends.
         """
+        n_observed = len(self.observed)
 
         def episode(task):
             obs, state = self.reset(None, task, params)
@@ -252,13 +255,19 @@ class LoadSheddingEnv:
                 total = total + jnp.where(live, reward, 0.0)
                 shed = shed + jnp.where(live, info["shed_pu"], 0.0)
                 failed = failed | (live & info["terminated"])
-                return (obs, new, policy_state, total, shed, failed), None
+                per_step = None
+                if trace:
+                    per_step = (new.history[-1, :n_observed], jnp.where(live, info["shed_pu"], 0.0))
+                return (obs, new, policy_state, total, shed, failed), per_step
 
             zero = jnp.zeros((), obs.dtype)
             init = (obs, state, policy_carry, zero, zero, jnp.zeros((), bool))
-            (_, state, _, total, shed, failed), _ = jax.lax.scan(
+            (_, state, _, total, shed, failed), per_step = jax.lax.scan(
                 step, init, None, length=self.config.n_steps)
-            return {"reward": total, "shed_pu": shed, "recovered": ~failed,
-                    "steps": state.step, "diverged": state.health.diverged}
+            out = {"reward": total, "shed_pu": shed, "recovered": ~failed,
+                   "steps": state.step, "diverged": state.health.diverged}
+            if trace:
+                out["vm"], out["shed_step_pu"] = per_step
+            return out
 
         return jax.vmap(episode)(tasks)
