@@ -175,6 +175,13 @@ class LoadSheddingEnv:
         self.observed = np.array([model.bus_index(b) for b in config.observed_buses])
         self.action_slots = np.array([model.load_slot(b) for b in config.action_buses])
 
+    def unchecked_buses(self, params: EnvParams) -> tuple[int, ...]:
+        """Observed buses below the recovery level before any fault: shedding cannot recover
+        them, so the recovery check leaves them out (they still count in the reward)."""
+        vm = np.abs(np.asarray(self.model.v0))[self.observed]
+        low = vm < float(params.recovery_level)
+        return tuple(int(b) for b, is_low in zip(self.config.observed_buses, low) if is_low)
+
     @property
     def obs_size(self) -> int:
         """Length of one observation (before stacking)."""

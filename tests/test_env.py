@@ -118,3 +118,13 @@ def test_vmap_equals_one_at_a_time(episodes, tasks):
         for key in ("reward", "shed_pu", "steps"):
             assert float(one[key][0]) == pytest.approx(float(batched["shed"][key][k]),
                                                        rel=1e-5, abs=1e-4), key
+
+
+def test_buses_below_the_recovery_level_before_the_fault_are_not_checked(env):
+    params = EnvParams()
+    assert env.unchecked_buses(params) == ()  # the built-in 39-bus case starts >= 0.984
+    strict = EnvParams(recovery_level=0.995)  # above 507 (0.994) and 508 (0.990) at rest
+    _, state = env.reset(None, make_task(env.model, None), strict)
+    assert env.unchecked_buses(strict) == (507, 508)
+    expected = [b not in (507, 508) for b in env.config.observed_buses]
+    assert np.asarray(state.recovery_check).tolist() == expected

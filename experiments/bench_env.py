@@ -1,0 +1,76 @@
+"""Environment benchmark: batched agent steps per second of the FIDVR study cases.
+
+    python -m experiments.bench_env [--cases ieee39_fidvr ieee300_fidvr]
+        [--batch-sizes 1 16 128 512] [--devices 1 2] [--out bench_results/env.json]
+
+Each rollout is a whole 10 s episode (100 agent steps of 0.1 s) of `LoadSheddingEnv.rollout`
+with a controller that never sheds, on training-set faults cycled over the batch; the batch
+axis is sharded over a 1-D mesh of CPU devices. Agent steps per second = batch × 100 / the
+best warm wall time.
+"""
+from __future__ import annotations
+
+import os
+
+os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                           + " --xla_force_host_platform_device_count=2").strip()
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
+
+from experiments.bench_sim import _timed  # noqa: E402
+from experiments.evaluate import no_control  # noqa: E402
+from jaxgrid import cases  # noqa: E402
+from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv  # noqa: E402
+from jaxgrid.tasks import task_batch, task_set  # noqa: E402
+
+
+def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
+    study = cases.load(name)
+    env = LoadSheddingEnv(study.compile(), EnvConfig.for_study(study))
+    specs = task_set(name.removesuffix("_fidvr") + "_train")
+    apply, params, carry = no_control(env)
+    run = jax.jit(env.rollout, static_argnums=0)
+    result = {"case": name, "dt_s": study.dt, "agent_steps": env.config.n_steps, "runs": []}
+    for n_dev in device_counts:
+        mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
+        for batch in batch_sizes:
+            if batch % n_dev:
+                continue
+            tasks = task_batch(env.model, [specs[k % len(specs)] for k in range(batch)])
+            tasks = jax.device_put(tasks, NamedSharding(mesh, PartitionSpec("batch")))
+            go = lambda: run(apply, params, tasks, EnvParams(), carry)  # noqa: E731
+            _, first = _timed(go)
+            warm = min(_timed(go)[1] for _ in range(repeats))
+            row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
+                   "warm_s": round(warm, 4),
+                   "agent_steps_per_s": round(batch * env.config.n_steps / warm, 1),
+                   "episodes_per_s": round(batch / warm, 2)}
+            print(name, row, flush=True)
+            result["runs"].append(row)
+    return result
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--cases", nargs="*", default=["ieee39_fidvr", "ieee300_fidvr"])
+    parser.add_argument("--batch-sizes", nargs="*", type=int, default=[1, 16, 128, 512])
+    parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--out", default="bench_results/env.json")
+    args = parser.parse_args(argv)
+    report = {"jax": jax.__version__, "backend": jax.default_backend(),
+              "cases": [bench_case(c, args.batch_sizes, args.devices, args.repeats)
+                        for c in args.cases]}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(report, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
