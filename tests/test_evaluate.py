@@ -29,6 +29,23 @@ def test_uncontrolled_test_set_fails_some_tasks_and_not_others(uncontrolled):
         assert outcome[0.02] >= outcome[0.1], f"bus {bus}: short fault fails, long recovers"
 
 
+@pytest.fixture(scope="module")
+def relays():
+    return evaluate("ieee39_fidvr", "uvls", "test")
+
+
+def test_uvls_sheds_on_the_failing_tasks_only(uncontrolled, relays):
+    pairs = list(zip(uncontrolled["tasks"], relays["tasks"]))
+    failing = [(a, b) for a, b in pairs if not a["recovered"]]
+    shed_on = sum(b["shed_mw"] > 0 for _, b in failing)
+    print(f"\nUVLS on the 120 test tasks: {relays['summary']}; sheds on {shed_on} of the "
+          f"{len(failing)} tasks that fail without control, recovers "
+          f"{sum(b['recovered'] for _, b in failing)} of them")
+    assert shed_on >= 0.9 * len(failing)
+    assert all(b["shed_mw"] == 0 for a, b in pairs if a["recovered"]), "UVLS shed needlessly"
+    assert relays["summary"]["mean_reward"] > uncontrolled["summary"]["mean_reward"]
+
+
 def test_cli_writes_the_documented_json_and_figures(tmp_path):
     out = tmp_path / "results.json"
     assert main(["--case", "ieee39_fidvr", "--controller", "none", "--tasks", "train",
