@@ -26,7 +26,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
 from experiments.bench_sim import _timed  # noqa: E402
 from experiments.evaluate import no_control  # noqa: E402
 from jaxgrid import cases  # noqa: E402
-from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv  # noqa: E402
+from jaxgrid.env import EnvConfig, LoadSheddingEnv, study_params  # noqa: E402
 from jaxgrid.tasks import task_batch, task_set  # noqa: E402
 
 
@@ -44,7 +44,7 @@ def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
                 continue
             tasks = task_batch(env.model, [specs[k % len(specs)] for k in range(batch)])
             tasks = jax.device_put(tasks, NamedSharding(mesh, PartitionSpec("batch")))
-            go = lambda: run(apply, params, tasks, EnvParams(), carry)  # noqa: E731
+            go = lambda: run(apply, params, tasks, study_params(name), carry)  # noqa: E731
             _, first = _timed(go)
             warm = min(_timed(go)[1] for _ in range(repeats))
             row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),

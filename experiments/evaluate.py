@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid import cases
-from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.env import EnvConfig, LoadSheddingEnv, study_params
 from jaxgrid.recovery import envelope
 from jaxgrid.tasks import task_batch, task_set
 
@@ -54,14 +54,15 @@ def evaluate(case: str, control: str, tasks: str, operating_points=(1.0,), plot_
     for point in operating_points:
         study = cases.load(case, load_level=point)
         env = LoadSheddingEnv(study.compile(), EnvConfig.for_study(study))
-        unchecked = env.unchecked_buses(EnvParams())
+        params = study_params(case)
+        unchecked = env.unchecked_buses(params)
         if unchecked:
             print(f"{study.name}: observed buses {list(unchecked)} sit below the recovery level "
                   "before any fault; the recovery check leaves them out")
         chosen = [s for s in specs if s.operating_point == point]
-        apply, params, carry = controller(control, env)
+        apply, policy_params, carry = controller(control, env)
         run = jax.jit(env.rollout, static_argnums=0, static_argnames="trace")
-        out = run(apply, params, task_batch(env.model, chosen), EnvParams(), carry,
+        out = run(apply, policy_params, task_batch(env.model, chosen), params, carry,
                   trace=plot_dir is not None)
         out = jax.tree.map(np.asarray, out)
         base_mva = study.case.base_mva

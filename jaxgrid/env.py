@@ -59,6 +59,19 @@ class EnvParams:
     action_high: float = 0.0
 
 
+# The study's values per built-in case where they differ from the EnvParams defaults.
+STUDY_PARAMS = {"ieee39_fidvr": {},
+                "ieee300_fidvr": {"c_voltage": 30.0, "unstable_penalty": 10000.0}}
+
+
+def study_params(case: str) -> EnvParams:
+    """EnvParams of a built-in study case ("ieee300_fidvr" or e.g. "ieee300_fidvr_load90")."""
+    base = case.split("_load")[0]
+    if base not in STUDY_PARAMS:
+        raise ValueError(f"no study parameters for case {case!r}; known: {', '.join(STUDY_PARAMS)}")
+    return EnvParams(**STUDY_PARAMS[base])
+
+
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
     """Structure of the task (static).

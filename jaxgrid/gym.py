@@ -35,7 +35,7 @@ import numpy as np
 from gymnasium import spaces
 
 from jaxgrid import cases
-from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv, study_params
 from jaxgrid.simulate import FaultEvent, make_task
 
 # Registered ids -> the built-in study case they wrap.
@@ -64,7 +64,8 @@ class LoadSheddingGymEnv(gymnasium.Env):
         study's training faults of the case (`training_faults`).
       config: overrides of `EnvConfig.for_study` fields, e.g. {"episode": 6.0} (s),
         {"history": 3}.
-      params: reward and action values (`EnvParams`), default the study's 39-bus values.
+      params: reward and action values (`EnvParams`), default the study's for the case
+        (`jaxgrid.env.study_params`).
 
     Spaces (float32):
       observation: (history·(n_observed + n_action),) the voltage magnitude at the observed
@@ -89,7 +90,7 @@ class LoadSheddingGymEnv(gymnasium.Env):
         model = study.compile()
         self.study = study
         self.env = LoadSheddingEnv(model, EnvConfig.for_study(study, **dict(config or {})))
-        self.params = params if params is not None else EnvParams()
+        self.params = params if params is not None else study_params(case)
         self.tasks = tuple(training_faults(case) if tasks is None else tasks)
         if not self.tasks:
             raise ValueError("tasks = []: give at least one FaultEvent or None")

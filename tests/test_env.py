@@ -12,7 +12,8 @@ import pytest
 
 from jaxgrid import cases
 from jaxgrid.env import (EnvConfig, EnvParams, LoadSheddingEnv, envelope_deviation,
-                         invalid_requests, prefault_requests, recovery_failed, shed_power)
+                         invalid_requests, prefault_requests, recovery_failed, shed_power,
+                         study_params)
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 
 
@@ -128,3 +129,10 @@ def test_buses_below_the_recovery_level_before_the_fault_are_not_checked(env):
     assert env.unchecked_buses(strict) == (507, 508)
     expected = [b not in (507, 508) for b in env.config.observed_buses]
     assert np.asarray(state.recovery_check).tolist() == expected
+
+
+def test_study_params_per_case():
+    assert study_params("ieee39_fidvr_load110") == EnvParams()
+    assert study_params("ieee300_fidvr") == EnvParams(c_voltage=30.0, unstable_penalty=10000.0)
+    with pytest.raises(ValueError, match="no study parameters for case 'ieee14'"):
+        study_params("ieee14")
