@@ -250,44 +250,49 @@ class LoadSheddingEnv:
                 "diverged": health.diverged}
         return history.reshape(-1), new, reward, done, info
 
-    def rollout(self, policy_apply, policy_params, tasks: Task, params: EnvParams,
+    def episode(self, policy_apply, policy_params, task: Task, params: EnvParams,
                 policy_carry=None, trace: bool = False):
-        """Whole episodes of a batch of tasks (leading axis), vmapped, each in `lax.scan`.
+        """One whole episode in `lax.scan` (un-batched; `rollout` vmaps it over tasks).
 
         policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
-        initial recurrent state (None for feed-forward policies). Reward stops after `done`.
-        Returns {"reward": (batch,), "shed_pu": (batch,), "recovered": (batch,) bool,
-        "steps": (batch,) agent steps taken, "diverged": (batch,) bool}; with `trace`
-        (static) also per agent step "vm" (batch, n_steps, n_observed) p.u. and
-        "shed_step_pu" (batch, n_steps), frozen after the episode ends.
+        initial policy state (None for feed-forward policies). After `done` the reward
+        stops and the policy state is held. Returns {"reward", "shed_pu", "recovered",
+        "steps" (agent steps taken), "diverged", "policy_carry" (final)}; with `trace`
+        (static) also per agent step "vm" (n_steps, n_observed) p.u. and "shed_step_pu"
+        (n_steps,), frozen after the episode ends.
         """
         n_observed = len(self.observed)
+        obs, state = self.reset(None, task, params)
 
-        def episode(task):
-            obs, state = self.reset(None, task, params)
+        def step(carry, _):
+            obs, state, policy_state, total, shed, failed = carry
+            live = ~state.done
+            action, new_policy_state = policy_apply(policy_params, obs, policy_state)
+            policy_state = jax.tree.map(lambda a, b: jnp.where(live, a, b), new_policy_state,
+                                        policy_state)
+            obs, new, reward, _, info = self.step(state, action, params)
+            new = jax.tree.map(lambda a, b: jnp.where(live, a, b), new, state)
+            total = total + jnp.where(live, reward, 0.0)
+            shed_now = jnp.where(live, info["shed_pu"], 0.0)
+            failed = failed | (live & info["terminated"])
+            per_step = (new.history[-1, :n_observed], shed_now) if trace else None
+            return (obs, new, policy_state, total, shed + shed_now, failed), per_step
 
-            def step(carry, _):
-                obs, state, policy_state, total, shed, failed = carry
-                action, policy_state = policy_apply(policy_params, obs, policy_state)
-                live = ~state.done
-                obs, new, reward, _, info = self.step(state, action, params)
-                new = jax.tree.map(lambda a, b: jnp.where(live, a, b), new, state)
-                total = total + jnp.where(live, reward, 0.0)
-                shed = shed + jnp.where(live, info["shed_pu"], 0.0)
-                failed = failed | (live & info["terminated"])
-                per_step = None
-                if trace:
-                    per_step = (new.history[-1, :n_observed], jnp.where(live, info["shed_pu"], 0.0))
-                return (obs, new, policy_state, total, shed, failed), per_step
+        zero = jnp.zeros((), obs.dtype)
+        init = (obs, state, policy_carry, zero, zero, jnp.zeros((), bool))
+        (_, state, carry, total, shed, failed), per_step = jax.lax.scan(
+            step, init, None, length=self.config.n_steps)
+        out = {"reward": total, "shed_pu": shed, "recovered": ~failed, "steps": state.step,
+               "diverged": state.health.diverged, "policy_carry": carry}
+        if trace:
+            out["vm"], out["shed_step_pu"] = per_step
+        return out
 
-            zero = jnp.zeros((), obs.dtype)
-            init = (obs, state, policy_carry, zero, zero, jnp.zeros((), bool))
-            (_, state, _, total, shed, failed), per_step = jax.lax.scan(
-                step, init, None, length=self.config.n_steps)
-            out = {"reward": total, "shed_pu": shed, "recovered": ~failed,
-                   "steps": state.step, "diverged": state.health.diverged}
-            if trace:
-                out["vm"], out["shed_step_pu"] = per_step
-            return out
+    def rollout(self, policy_apply, policy_params, tasks: Task, params: EnvParams,
+                policy_carry=None, trace: bool = False):
+        """`episode` vmapped over a batch of tasks (leading axis); the policy is shared.
 
-        return jax.vmap(episode)(tasks)
+        Every entry of the returned dict gains a leading batch axis.
+        """
+        return jax.vmap(lambda task: self.episode(policy_apply, policy_params, task, params,
+                                                  policy_carry, trace))(tasks)
