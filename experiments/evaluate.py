@@ -40,9 +40,22 @@ def controller(spec: str, env: LoadSheddingEnv):
         from baselines.uvls import uvls_policy
         return uvls_policy(env)
     if spec.startswith("policy:"):
-        raise ValueError(f"--controller {spec!r}: trained policies come with the PARS trainer "
-                         "(ars), which is not built yet")
+        from ars.checkpoint import load_policy
+        from ars.pars import initial_carry, normalized_policy
+        policy, params, _ = load_policy(spec.removeprefix("policy:"))
+        if policy.spec.obs_size != env.config.history * env.obs_size:
+            raise ValueError(f"{spec}: the policy observes {policy.spec.obs_size} values, this "
+                             f"environment gives {env.config.history * env.obs_size}")
+        return normalized_policy(policy), params, initial_carry(policy)
     raise ValueError(f"--controller {spec!r}: allowed none, uvls or policy:PATH")
+
+
+def _history(control: str) -> int:
+    """Observations stacked: what a saved policy was trained with, else 1."""
+    if not control.startswith("policy:"):
+        return 1
+    info = Path(control.removeprefix("policy:")) / "policy.json"
+    return int(json.loads(info.read_text()).get("history", 1)) if info.is_file() else 1
 
 
 def evaluate(case: str, control: str, tasks: str, operating_points=(1.0,), plot_dir=None,
@@ -53,7 +66,8 @@ def evaluate(case: str, control: str, tasks: str, operating_points=(1.0,), plot_
     rows, figures = [], []
     for point in operating_points:
         study = cases.load(case, load_level=point)
-        env = LoadSheddingEnv(study.compile(), EnvConfig.for_study(study))
+        env = LoadSheddingEnv(study.compile(),
+                              EnvConfig.for_study(study, history=_history(control)))
         params = study_params(case)
         unchecked = env.unchecked_buses(params)
         if unchecked:

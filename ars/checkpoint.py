@@ -1,0 +1,66 @@
+"""Checkpoints (orbax-checkpoint) and saved policies.
+
+A checkpoint holds the TrainState (θ, normaliser, PRNG key, iteration, α, ν) and a JSON
+part (config, metrics so far). A saved policy is `policy.json` (architecture and whatever
+the trainer adds) + `policy.npz` (θ, observation mean and std), loadable without orbax.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import orbax.checkpoint as ocp
+
+from ars.pars import TrainState
+from ars.policies import Policy, PolicySpec
+
+
+def manager(directory: str | Path, every: int) -> ocp.CheckpointManager:
+    """A manager that saves every `every` iterations (and when forced) and keeps the last 3."""
+    options = ocp.CheckpointManagerOptions(save_interval_steps=every, max_to_keep=3)
+    return ocp.CheckpointManager(Path(directory).absolute(), options=options)
+
+
+def save(mgr: ocp.CheckpointManager, state: TrainState, meta: dict, force: bool = False) -> None:
+    """Save `state` and the JSON-able `meta` at step = state.iteration (if due or forced)."""
+    mgr.save(int(state.iteration), args=ocp.args.Composite(
+        state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta)), force=force)
+    mgr.wait_until_finished()
+
+
+def restore_latest(mgr: ocp.CheckpointManager, template: TrainState):
+    """(state, meta) of the latest checkpoint, or None if there is none."""
+    step = mgr.latest_step()
+    if step is None:
+        return None
+    out = mgr.restore(step, args=ocp.args.Composite(
+        state=ocp.args.StandardRestore(template), meta=ocp.args.JsonRestore()))
+    return out.state, out.meta
+
+
+def save_policy(directory: str | Path, spec: PolicySpec, state: TrainState, extra: dict) -> None:
+    """Write policy.json (spec + extra) and policy.npz (theta, mean, std) into `directory`."""
+    folder = Path(directory)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "policy.json").write_text(json.dumps(
+        {"spec": dataclasses.asdict(spec), **extra}, indent=1))
+    np.savez(folder / "policy.npz", theta=np.asarray(state.theta),
+             mean=np.asarray(state.stats.mean), std=np.asarray(state.stats.std))
+
+
+def load_policy(directory: str | Path):
+    """(Policy, (θ, mean, std), info dict) from a folder written by `save_policy`."""
+    folder = Path(directory)
+    for name in ("policy.json", "policy.npz"):
+        if not (folder / name).is_file():
+            raise ValueError(f"{folder}: no {name} (not a saved policy folder)")
+    info = json.loads((folder / "policy.json").read_text())
+    spec = info["spec"]
+    policy = Policy(PolicySpec(**{**spec, "hidden": tuple(spec["hidden"])}))
+    arrays = np.load(folder / "policy.npz")
+    if arrays["theta"].shape != (policy.size,):
+        raise ValueError(f"{folder}: theta has {arrays['theta'].shape} values, the "
+                         f"{spec['kind']} policy needs {policy.size}")
+    return policy, (arrays["theta"], arrays["mean"], arrays["std"]), info

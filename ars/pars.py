@@ -1,0 +1,185 @@
+"""The PARS iteration (PNNL PARS study, Algorithm 1; ARS V2-t of Mania et al. 2018).
+
+One jit-compiled function does a whole iteration:
+  1. sample N directions δ ~ N(0, I) over the flat policy vector θ;
+  2. build the 2N vectors θ ± ν·δ and pick m tasks (the same for every direction and sign,
+     so r+ − r− measures the perturbation alone);
+  3. roll out all 2N·m (θ, task) pairs in one vmapped batch whose axis is sharded over a
+     1-D device mesh (`jax.sharding`), observations normalised by the frozen running stats;
+  4. average the returns per ± direction, keep the top b directions by max(r+, r−);
+  5. θ += α / (b·σ_b) Σ_top (r+ − r−)·δ, σ_b the std of the 2b selected returns (1 if 0);
+  6. α ← ε·α, ν ← ε·ν; merge the observation statistics of every rollout.
+A non-finite return is replaced by the lowest finite return of the iteration, so it can
+never rank first. Nothing here knows about grids.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from ars import normalizer
+from ars.normalizer import RunningStats
+from ars.policies import Policy
+
+
+@dataclasses.dataclass(frozen=True)
+class ParsConfig:
+    """Hyper-parameters (defaults: the study's 39-bus run).
+
+    Attributes:
+      directions: N.  top: b (<= N).  step_size: α.  noise: ν.  decay: ε in (0, 1].
+      tasks_per_iteration: m, tasks drawn (without replacement) per iteration.
+      seed: PRNG seed.
+    """
+
+    directions: int = 16
+    top: int = 8
+    step_size: float = 1.0
+    noise: float = 2.0
+    decay: float = 0.99
+    tasks_per_iteration: int = 9
+    seed: int = 0
+
+    def __post_init__(self):
+        checks = {
+            "directions": (self.directions >= 1, ">= 1"),
+            "top": (1 <= self.top <= self.directions, f"in [1, directions = {self.directions}]"),
+            "step_size": (self.step_size > 0, "> 0"),
+            "noise": (self.noise > 0, "> 0"),
+            "decay": (0 < self.decay <= 1, "in (0, 1]"),
+            "tasks_per_iteration": (self.tasks_per_iteration >= 1, ">= 1"),
+        }
+        for name, (ok, allowed) in checks.items():
+            if not ok:
+                raise ValueError(f"{name} = {getattr(self, name)!r}: allowed {allowed}")
+
+
+@struct.dataclass
+class TrainState:
+    """Everything an iteration changes.
+
+    Attributes:
+      theta: (size,) policy parameters.  stats: observation RunningStats.
+      key: PRNG key.  iteration: () int.  step_size: α now.  noise: ν now.
+    """
+
+    theta: jnp.ndarray
+    stats: RunningStats
+    key: jnp.ndarray
+    iteration: jnp.ndarray
+    step_size: jnp.ndarray
+    noise: jnp.ndarray
+
+
+def init_state(policy: Policy, config: ParsConfig) -> TrainState:
+    """θ = 0, empty statistics, the seed's key, α and ν at their initial values."""
+    return TrainState(theta=policy.initial_theta(),
+                      stats=RunningStats.empty(policy.spec.obs_size),
+                      key=jax.random.PRNGKey(config.seed), iteration=jnp.zeros((), jnp.int32),
+                      step_size=jnp.asarray(config.step_size, jnp.float32),
+                      noise=jnp.asarray(config.noise, jnp.float32))
+
+
+def normalized_policy(policy: Policy):
+    """policy_apply(params, obs, carry) with params = (θ, mean, std) that normalises the
+    observation and accumulates its sums (count, Σx, Σx²) in the carry."""
+
+    def apply(params, obs, carry):
+        theta, mean, std = params
+        net_carry, (count, total, total_sq) = carry
+        action, net_carry = policy.apply(theta, (obs - mean) / std, net_carry)
+        c, s, s2 = normalizer.sums(obs)
+        return action, (net_carry, (count + c, total + s, total_sq + s2))
+
+    return apply
+
+
+def initial_carry(policy: Policy):
+    """The carry `normalized_policy` starts an episode with."""
+    n = policy.spec.obs_size
+    return policy.initial_carry(), (jnp.zeros(()), jnp.zeros(n), jnp.zeros(n))
+
+
+def ars_update(theta, delta, r_plus, r_minus, top: int, step_size):
+    """θ + α/(b·σ_b) Σ_top (r+ − r−)·δ over the b directions with the largest max(r+, r−).
+
+    delta: (N, size); r_plus, r_minus: (N,). Returns (θ, indices of the top directions).
+    """
+    best = jnp.argsort(-jnp.maximum(r_plus, r_minus))[:top]
+    selected = jnp.concatenate([r_plus[best], r_minus[best]])
+    sigma = jnp.std(selected)
+    sigma = jnp.where(sigma > 0, sigma, 1.0)
+    step = step_size / (top * sigma) * ((r_plus[best] - r_minus[best]) @ delta[best])
+    return theta + step, best
+
+
+def clean_returns(returns):
+    """Non-finite returns replaced by the lowest finite one (0 if none is finite)."""
+    finite = jnp.isfinite(returns)
+    floor = jnp.min(jnp.where(finite, returns, jnp.inf))
+    floor = jnp.where(jnp.isfinite(floor), floor, 0.0)
+    return jnp.where(finite, returns, floor)
+
+
+def make_iteration(episode, policy: Policy, config: ParsConfig, tasks, mesh: Mesh | None = None):
+    """`iteration(state) -> (state, metrics)`, compiled once (`iteration.compiled`).
+
+    episode(policy_apply, policy_params, task, policy_carry) -> dict with "reward" () and
+    "policy_carry" (the final carry); tasks: pytree with a leading axis of n_tasks. The
+    2N·m rollouts are sharded over `mesh` (1-D, axis "batch"; default all devices).
+    """
+    tasks = jax.tree.map(jnp.asarray, tasks)
+    n_tasks = int(jax.tree.leaves(tasks)[0].shape[0])
+    m = config.tasks_per_iteration
+    if m > n_tasks:
+        raise ValueError(f"tasks_per_iteration = {m}: only {n_tasks} tasks available")
+    mesh = mesh or Mesh(np.array(jax.devices()), ("batch",))
+    batch = 2 * config.directions * m
+    if batch % mesh.size:
+        raise ValueError(f"2·directions·tasks_per_iteration = {batch} rollouts do not split "
+                         f"over {mesh.size} devices")
+    spread = NamedSharding(mesh, PartitionSpec("batch"))
+    apply = normalized_policy(policy)
+    carry0 = initial_carry(policy)
+    n_dir = config.directions
+
+    def iteration(state: TrainState):
+        key, k_dir, k_task = jax.random.split(state.key, 3)
+        delta = jax.random.normal(k_dir, (n_dir, policy.size))
+        thetas = jnp.concatenate([state.theta + state.noise * delta,
+                                  state.theta - state.noise * delta])
+        chosen = jax.random.choice(k_task, n_tasks, (m,), replace=False)
+        theta_b = jax.lax.with_sharding_constraint(jnp.repeat(thetas, m, axis=0), spread)
+        task_b = jax.tree.map(
+            lambda a: jax.lax.with_sharding_constraint(
+                jnp.tile(a[chosen], (2 * n_dir,) + (1,) * (a.ndim - 1)), spread), tasks)
+        mean, std = state.stats.mean, state.stats.std
+        out = jax.vmap(lambda th, task: episode(apply, (th, mean, std), task, carry0))(
+            theta_b, task_b)
+        returns = clean_returns(out["reward"].reshape(2 * n_dir, m).mean(axis=1))
+        r_plus, r_minus = returns[:n_dir], returns[n_dir:]
+        theta, _ = ars_update(state.theta, delta, r_plus, r_minus, config.top, state.step_size)
+        _, (count, total, total_sq) = out["policy_carry"]
+        stats = normalizer.merge(state.stats, count.sum(), total.sum(0), total_sq.sum(0))
+        new = TrainState(theta=theta, stats=stats, key=key, iteration=state.iteration + 1,
+                         step_size=state.step_size * config.decay,
+                         noise=state.noise * config.decay)
+        metrics = {"reward_mean": returns.mean(), "reward_max": returns.max(),
+                   "rollouts": jnp.asarray(batch)}
+        return new, metrics
+
+    replicated = NamedSharding(mesh, PartitionSpec())
+    compiled = jax.jit(iteration, in_shardings=replicated, out_shardings=replicated)
+
+    def run(state: TrainState):
+        # a fresh state lives on one device: place it as the compiled function returns it,
+        # so the first and later calls share one compilation
+        return compiled(jax.device_put(state, replicated))
+
+    run.compiled = compiled
+    return run
