@@ -1,0 +1,131 @@
+"""PARS: the update rule by hand, a known quadratic objective, the normaliser, guards,
+determinism and device counts, on toy episodes (nothing about grids)."""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.sharding import Mesh
+
+from ars import normalizer
+from ars.normalizer import RunningStats
+from ars.pars import (ParsConfig, ars_update, clean_returns, init_state, initial_carry,
+                      make_iteration, normalized_policy)
+from ars.policies import Policy, PolicySpec
+
+TARGETS = jnp.array([[-0.05, -0.15], [-0.10, -0.02], [-0.18, -0.08], [-0.12, -0.12]])
+
+
+def quadratic_episode(apply, params, task, carry):
+    """One step: observe the task's target (2,), act, earn −100·|action − target|²."""
+    action, carry = apply(params, task, carry)
+    return {"reward": -100.0 * jnp.sum((action - task) ** 2), "policy_carry": carry}
+
+
+def test_update_equals_the_hand_computed_one():
+    rng = np.random.default_rng(0)
+    theta, delta = rng.normal(size=5), rng.normal(size=(4, 5))
+    r_plus, r_minus = np.array([1.0, 5.0, -2.0, 0.5]), np.array([3.0, -1.0, 4.0, 0.0])
+    new, best = ars_update(jnp.asarray(theta), jnp.asarray(delta), jnp.asarray(r_plus),
+                           jnp.asarray(r_minus), top=2, step_size=0.3)
+    # max(r+, r−) = [3, 5, 4, 0.5]: the top two are directions 1 and 2
+    assert sorted(np.asarray(best).tolist()) == [1, 2]
+    sigma = np.std([5.0, -2.0, -1.0, 4.0])
+    expected = theta + 0.3 / (2 * sigma) * ((5.0 - -1.0) * delta[1] + (-2.0 - 4.0) * delta[2])
+    np.testing.assert_allclose(np.asarray(new), expected, rtol=1e-5)
+
+
+def test_zero_spread_and_non_finite_returns_are_guarded():
+    theta, delta = jnp.zeros(3), jnp.ones((2, 3))
+    same = jnp.array([2.0, 2.0])
+    new, _ = ars_update(theta, delta, same, same, top=2, step_size=1.0)
+    assert np.all(np.isfinite(np.asarray(new))) and np.allclose(np.asarray(new), 0.0)
+    cleaned = clean_returns(jnp.array([jnp.nan, -5.0, jnp.inf, 3.0, -jnp.inf]))
+    assert np.asarray(cleaned).tolist() == [-5.0, -5.0, -5.0, 3.0, -5.0]
+    _, best = ars_update(theta, delta, cleaned[:2], cleaned[2:4], top=1, step_size=1.0)
+    assert int(best[0]) == 1, "a non-finite return must never rank first"
+
+
+def test_normaliser_merge_equals_the_pooled_statistics():
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(2.0, 3.0, size=(50, 4)), rng.normal(-1.0, 0.5, size=(70, 4))
+    stats = RunningStats.empty(4)
+    for batch in (a, b):
+        stats = normalizer.merge(stats, len(batch), batch.sum(0), (batch ** 2).sum(0))
+    pooled = np.concatenate([a, b])
+    np.testing.assert_allclose(np.asarray(stats.mean), pooled.mean(0), rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(stats.std), pooled.std(0), rtol=1e-4)
+    constant = normalizer.merge(RunningStats.empty(1), 3, jnp.array([3.0]), jnp.array([3.0]))
+    assert float(constant.std[0]) == 1.0, "a constant feature is not scaled up"
+
+
+@pytest.mark.parametrize("kind, hidden", [("linear", ()), ("fnn", (8, 8)), ("lstm", (8, 4))])
+def test_policies_start_at_no_control_and_stay_in_range(kind, hidden):
+    policy = Policy(PolicySpec(kind, 3, 2, hidden, -0.2, 0.0))
+    obs = jnp.array([0.5, -1.0, 2.0])
+    action, _ = policy.apply(policy.initial_theta(), obs, policy.initial_carry())
+    assert np.asarray(action).tolist() == [0.0, 0.0]
+    theta = jax.random.normal(jax.random.PRNGKey(0), (policy.size,)) * 5
+    action, carry = policy.apply(theta, obs, policy.initial_carry())
+    assert np.all((np.asarray(action) >= -0.2) & (np.asarray(action) <= 0.0))
+    assert jax.tree.structure(carry) == jax.tree.structure(policy.initial_carry())
+
+
+@pytest.fixture(scope="module")
+def quadratic():
+    policy = Policy(PolicySpec("linear", 2, 2, (), -0.2, 0.0))
+    config = ParsConfig(directions=8, top=4, step_size=0.2, noise=0.1, decay=0.995,
+                        tasks_per_iteration=2, seed=3)
+    return policy, config
+
+
+def _train(policy, config, iterations, mesh=None):
+    iteration = make_iteration(quadratic_episode, policy, config, TARGETS, mesh)
+    state, history = init_state(policy, config), []
+    for _ in range(iterations):
+        state, metrics = iteration(state)
+        history.append(float(metrics["reward_mean"]))
+    return state, history, iteration
+
+
+def _objective(policy, state):
+    """Mean reward of the unperturbed policy θ over all targets (normalised as in training)."""
+    apply, params = normalized_policy(policy), (state.theta, state.stats.mean, state.stats.std)
+    rewards = [quadratic_episode(apply, params, t, initial_carry(policy))["reward"]
+               for t in TARGETS]
+    return float(np.mean(rewards))
+
+
+def test_ars_improves_a_quadratic_objective(quadratic):
+    policy, config = quadratic
+    start = _objective(policy, init_state(policy, config))
+    state, _, iteration = _train(policy, config, 60)
+    end = _objective(policy, state)
+    print(f"\nquadratic: reward of θ {start:.3f} -> {end:.3f} (optimum 0)")
+    assert end > 0.2 * start, "ARS should remove most of the initial loss"
+    assert iteration.compiled._cache_size() == 1, "the iteration compiles once"
+    assert int(state.iteration) == 60
+    assert float(state.step_size) == pytest.approx(0.2 * 0.995 ** 60, rel=1e-5)
+    assert float(state.stats.count) == 60 * 2 * 8 * 2, "every rollout's observation merged"
+
+
+def test_same_seed_same_theta_and_device_counts_agree(quadratic):
+    policy, config = quadratic
+    one_a, _, _ = _train(policy, config, 5, Mesh(np.array(jax.devices()[:1]), ("batch",)))
+    one_b, _, _ = _train(policy, config, 5, Mesh(np.array(jax.devices()[:1]), ("batch",)))
+    two, _, _ = _train(policy, config, 5, Mesh(np.array(jax.devices()[:2]), ("batch",)))
+    np.testing.assert_array_equal(np.asarray(one_a.theta), np.asarray(one_b.theta))
+    np.testing.assert_allclose(np.asarray(two.theta), np.asarray(one_a.theta), atol=1e-5)
+    other, _, _ = _train(policy, ParsConfig(**{**config.__dict__, "seed": 4}), 5)
+    assert not np.allclose(np.asarray(other.theta), np.asarray(one_a.theta))
+
+
+def test_bad_hyper_parameters_are_named(quadratic):
+    policy, config = quadratic
+    with pytest.raises(ValueError, match=r"top = 9: allowed in \[1, directions = 8\]"):
+        ParsConfig(directions=8, top=9)
+    with pytest.raises(ValueError, match="decay = 1.5"):
+        ParsConfig(decay=1.5)
+    with pytest.raises(ValueError, match="tasks_per_iteration = 5: only 4 tasks"):
+        make_iteration(quadratic_episode, policy, ParsConfig(tasks_per_iteration=5), TARGETS)
