@@ -68,3 +68,16 @@ def test_saved_policy_evaluates_and_resume_needs_a_checkpoint(straight, tmp_path
     assert (straight / "learning_curve.png").is_file()
     assert main("ieee39_fidvr", DEFAULTS, TINY + ["--resume", "--out", str(tmp_path)]) == 2
     assert "no checkpoint" in capsys.readouterr().err
+
+
+def test_short_300_bus_run_goes_through_the_full_path(tmp_path):
+    from experiments.train_300bus import DEFAULTS as DEFAULTS_300
+    args = ["--hidden", "8,8", "--directions", "2", "--top", "1", "--tasks-per-iteration", "2",
+            "--episode", "0.5", "--iterations", "3", "--checkpoint-every", "2",
+            "--out", str(tmp_path)]
+    assert main("ieee300_fidvr", DEFAULTS_300, args) == 0
+    rows = [json.loads(line) for line in _lines(tmp_path / "metrics.jsonl")]
+    assert [r["rollouts"] for r in rows] == [8, 16, 24]
+    assert all(np.isfinite(r["reward_mean"]) for r in rows)
+    saved = json.loads((tmp_path / "policy" / "policy.json").read_text())
+    assert saved["spec"]["kind"] == "lstm" and saved["case"] == "ieee300_fidvr"
