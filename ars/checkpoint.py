@@ -10,6 +10,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
@@ -31,13 +32,17 @@ def save(mgr: ocp.CheckpointManager, state: TrainState, meta: dict, force: bool 
 
 
 def restore_latest(mgr: ocp.CheckpointManager, template: TrainState):
-    """(state, meta) of the latest checkpoint, or None if there is none."""
+    """(state, meta) of the latest checkpoint, or None if there is none.
+
+    The state comes back in host memory (numpy), so `make_iteration` can place it on a
+    mesh that spans several processes.
+    """
     step = mgr.latest_step()
     if step is None:
         return None
     out = mgr.restore(step, args=ocp.args.Composite(
         state=ocp.args.StandardRestore(template), meta=ocp.args.JsonRestore()))
-    return out.state, out.meta
+    return jax.device_get(out.state), out.meta
 
 
 def save_policy(directory: str | Path, spec: PolicySpec, state: TrainState, extra: dict) -> None:

@@ -102,30 +102,35 @@ def _train(case: str, args) -> int:
             raise ValueError(f"--resume: no checkpoint in {out / 'checkpoints'}")
         state, meta = restored
         log = meta["metrics"]
-    (out / "metrics.jsonl").write_text("".join(json.dumps(m) + "\n" for m in log))
+    # every process computes the same replicated state; the first one writes the files
+    # (orbax coordinates the checkpoints itself)
+    primary = jax.process_index() == 0
+    metrics_path = out / "metrics.jsonl"
+    if primary:
+        metrics_path.write_text("".join(json.dumps(m) + "\n" for m in log))
     done = int(state.iteration)
     rollouts = log[-1]["rollouts"] if log else 0
-    bar = tqdm(total=args.iterations, initial=done, unit="it", disable=jax.process_index() != 0)
-    with open(out / "metrics.jsonl", "a") as metrics_file:
-        while done < args.iterations:
-            start = time.perf_counter()
-            state, metrics = iteration(state)
-            metrics = jax.device_get(metrics)
-            wall = time.perf_counter() - start
-            done, rollouts = done + 1, rollouts + int(metrics["rollouts"])
-            row = {"iteration": done, "reward_mean": float(metrics["reward_mean"]),
-                   "reward_max": float(metrics["reward_max"]), "wall_s": round(wall, 3),
-                   "rollouts": rollouts}
-            log.append(row)
-            metrics_file.write(json.dumps(row) + "\n")
-            metrics_file.flush()
-            bar.set_postfix(mean=f"{row['reward_mean']:.1f}", best=f"{row['reward_max']:.1f}",
-                            s_per_it=f"{wall:.2f}")
-            bar.update(1)
-            checkpoint.save(mgr, state, {"metrics": log, **run_info},
-                            force=done == args.iterations)
+    bar = tqdm(total=args.iterations, initial=done, unit="it", disable=not primary)
+    while done < args.iterations:
+        start = time.perf_counter()
+        state, metrics = iteration(state)
+        metrics = jax.device_get(metrics)
+        wall = time.perf_counter() - start
+        done, rollouts = done + 1, rollouts + int(metrics["rollouts"])
+        row = {"iteration": done, "reward_mean": float(metrics["reward_mean"]),
+               "reward_max": float(metrics["reward_max"]), "wall_s": round(wall, 3),
+               "rollouts": rollouts}
+        log.append(row)
+        if primary:
+            with open(metrics_path, "a") as metrics_file:
+                metrics_file.write(json.dumps(row) + "\n")
+        bar.set_postfix(mean=f"{row['reward_mean']:.1f}", best=f"{row['reward_max']:.1f}",
+                        s_per_it=f"{wall:.2f}")
+        bar.update(1)
+        checkpoint.save(mgr, state, {"metrics": log, **run_info},
+                        force=done == args.iterations)
     bar.close()
-    if jax.process_index() == 0:
+    if primary:
         checkpoint.save_policy(out / "policy", spec, state, run_info)
         _learning_curve(log, out / "learning_curve.png", case)
         print(f"{out}: {done} iterations, last mean reward {log[-1]['reward_mean']:.1f}, "

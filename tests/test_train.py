@@ -1,5 +1,6 @@
 """The training command: a run killed with SIGKILL resumes from its last checkpoint, loses
-at most --checkpoint-every iterations, and ends where an uninterrupted run ends; the saved
+at most --checkpoint-every iterations, and ends where an uninterrupted run ends; two
+processes joined by `jax.distributed` on loopback end where one process does; the saved
 policy loads into the evaluation command. Tiny settings (linear policy, 1 direction, 1 task,
 0.5 s episodes) keep it to a few compiles."""
 from __future__ import annotations
@@ -7,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -60,6 +62,39 @@ def test_sigkill_mid_training_resumes_and_matches_an_uninterrupted_run(tmp_path,
     b = np.load(straight / "policy" / "policy.npz")
     np.testing.assert_array_equal(a["theta"], b["theta"])
     np.testing.assert_allclose(a["mean"], b["mean"], rtol=1e-6)
+
+
+def _train_on_two_processes(out, *args):
+    """Run the 39-bus command as 2 processes of 1 CPU device each, joined on loopback."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    env = dict(os.environ, PYTHONPATH=str(REPO),
+               XLA_FLAGS="--xla_force_host_platform_device_count=1")
+    procs = [subprocess.Popen(
+        [sys.executable, "-m", "experiments.train_39bus", *TINY, *args, "--out", str(out),
+         "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2", "--process-id", str(i)],
+        cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        for i in range(2)]
+    logs = [proc.communicate(timeout=600)[0] for proc in procs]
+    for i, (proc, log) in enumerate(zip(procs, logs)):
+        assert proc.returncode == 0, f"process {i} failed:\n{log[-2000:]}"
+
+
+def test_two_processes_on_loopback_match_one_process(tmp_path, straight):
+    """2 processes x 1 device against 1 process x 2 devices (the same mesh size, so the same
+    arithmetic): a fresh start, then a resume from a checkpoint, to 12 iterations."""
+    out = tmp_path / "two"
+    _train_on_two_processes(out, "--iterations", "6")
+    _train_on_two_processes(out, "--iterations", "12", "--resume")
+    rows = [json.loads(line) for line in _lines(out / "metrics.jsonl")]
+    assert [r["iteration"] for r in rows] == list(range(1, 13)), "one writer, one line each"
+    one = [json.loads(line) for line in _lines(straight / "metrics.jsonl")]
+    assert [r["reward_mean"] for r in rows] == [r["reward_mean"] for r in one]
+    a = np.load(out / "policy" / "policy.npz")
+    b = np.load(straight / "policy" / "policy.npz")
+    for name in ("theta", "mean", "std"):
+        np.testing.assert_array_equal(a[name], b[name])
 
 
 def test_saved_policy_evaluates_and_resume_needs_a_checkpoint(straight, tmp_path, capsys):
