@@ -7,8 +7,9 @@ defaults; every hyper-parameter has a flag. Output folder DIR:
   policy/         the trained policy (experiments.evaluate --controller policy:DIR/policy)
   learning_curve.png
 `--resume` continues from the last checkpoint; `--iterations` is the run's total.
-Multi-host: --coordinator HOST:PORT --num-processes P --process-id I (or the cluster
-environment that `jax.distributed.initialize` reads) before anything else touches JAX.
+Multi-host: --coordinator HOST:PORT --num-processes P --process-id I, or --distributed alone
+where `jax.distributed.initialize` can read them from the cluster environment; it is called
+before anything else touches JAX. Process 0 writes the files.
 """
 from __future__ import annotations
 
@@ -44,6 +45,9 @@ def parser(case: str, defaults: dict) -> argparse.ArgumentParser:
     p.add_argument("--out", default=f"runs/{case}", help="output folder")
     p.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
     p.add_argument("--checkpoint-every", type=int, default=10, help="K iterations")
+    p.add_argument("--distributed", action="store_true",
+                   help="multi-host: join a jax.distributed cluster; without the next three "
+                        "flags the cluster environment (Slurm, Open MPI, TPU) supplies them")
     p.add_argument("--coordinator", help="multi-host: coordinator address HOST:PORT")
     p.add_argument("--num-processes", type=int, help="multi-host: number of processes")
     p.add_argument("--process-id", type=int, help="multi-host: this process's index")
@@ -52,7 +56,7 @@ def parser(case: str, defaults: dict) -> argparse.ArgumentParser:
 
 def main(case: str, defaults: dict, argv: list[str] | None = None) -> int:
     args = parser(case, defaults).parse_args(argv)
-    if args.coordinator or args.num_processes:
+    if args.distributed or args.coordinator or args.num_processes:
         jax.distributed.initialize(args.coordinator, args.num_processes, args.process_id)
     try:
         return _train(case, args)
@@ -61,15 +65,39 @@ def main(case: str, defaults: dict, argv: list[str] | None = None) -> int:
         return 2
 
 
-def _train(case: str, args) -> int:
-    from tqdm import tqdm
+def build(case: str, policy_kind: str, hidden: tuple[int, ...], history: int,
+          config, episode: float = 10.0, load_level: float = 1.0, mesh=None):
+    """(iteration, Policy, PolicySpec) for PARS on a built-in study case.
 
-    from ars import checkpoint
-    from ars.pars import ParsConfig, init_state, make_iteration
+    `iteration(state) -> (state, metrics)` is `ars.pars.make_iteration` over the case's
+    training tasks, episodes of `episode` s, rollouts sharded over `mesh` (default: all
+    devices).
+    """
+    from ars.pars import make_iteration
     from ars.policies import Policy, PolicySpec
     from jaxgrid import cases
     from jaxgrid.env import EnvConfig, LoadSheddingEnv, study_params
     from jaxgrid.tasks import task_batch, task_set
+
+    study = cases.load(case, load_level=load_level)
+    env = LoadSheddingEnv(study.compile(), EnvConfig.for_study(study, history=history,
+                                                                episode=episode))
+    params = study_params(case)
+    spec = PolicySpec(policy_kind, history * env.obs_size, len(env.action_slots), hidden,
+                      float(params.action_low), float(params.action_high))
+    policy = Policy(spec)
+    tasks = task_batch(env.model, task_set(case.removesuffix("_fidvr") + "_train"))
+    iteration = make_iteration(
+        lambda apply, pp, task, carry: env.episode(apply, pp, task, params, carry),
+        policy, config, tasks, mesh)
+    return iteration, policy, spec
+
+
+def _train(case: str, args) -> int:
+    from tqdm import tqdm
+
+    from ars import checkpoint
+    from ars.pars import ParsConfig, init_state
 
     hidden = tuple(int(h) for h in str(args.hidden).split(",") if h.strip())
     history = args.history or (1 if args.policy == "lstm" else 10)
@@ -78,17 +106,8 @@ def _train(case: str, args) -> int:
                         tasks_per_iteration=args.tasks_per_iteration, seed=args.seed)
     if args.iterations < 1 or args.checkpoint_every < 1:
         raise ValueError("--iterations and --checkpoint-every must be >= 1")
-    study = cases.load(case, load_level=args.load_level)
-    env = LoadSheddingEnv(study.compile(), EnvConfig.for_study(study, history=history,
-                                                                episode=args.episode))
-    params = study_params(case)
-    spec = PolicySpec(args.policy, history * env.obs_size, len(env.action_slots), hidden,
-                      float(params.action_low), float(params.action_high))
-    policy = Policy(spec)
-    tasks = task_batch(env.model, task_set(case.removesuffix("_fidvr") + "_train"))
-    iteration = make_iteration(
-        lambda apply, pp, task, carry: env.episode(apply, pp, task, params, carry),
-        policy, config, tasks)
+    iteration, policy, spec = build(case, args.policy, hidden, history, config, args.episode,
+                                    args.load_level)
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

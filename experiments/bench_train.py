@@ -1,0 +1,92 @@
+"""Training benchmark: seconds per PARS iteration and rollouts per second, by case and
+device count.
+
+    python -m experiments.bench_train [--cases ieee39_fidvr ieee300_fidvr] [--devices 1 2]
+                                      [--repeats 2] [--out bench_results/train.json]
+
+Each case runs with the study's defaults of its training command (LSTM; 39-bus N = 16,
+b = 8; 300-bus N = 128, b = 64; m = 9 tasks, 10 s episodes), so an iteration is 2·N·m
+rollouts: 288 (39-bus) and 2304 (300-bus). The rollout batch is sharded over a 1-D mesh of
+the first `d` CPU devices (or of GPUs, where the backend has them). The first call (compile +
+run) and the best of `--repeats` later calls are timed.
+"""
+from __future__ import annotations
+
+import os
+
+os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                           + " --xla_force_host_platform_device_count=2").strip()
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+from jax.sharding import Mesh  # noqa: E402
+
+from ars.pars import ParsConfig, init_state  # noqa: E402
+from experiments import train_39bus, train_300bus  # noqa: E402
+from experiments.train import build  # noqa: E402
+
+DEFAULTS = {"ieee39_fidvr": train_39bus.DEFAULTS, "ieee300_fidvr": train_300bus.DEFAULTS}
+TASKS_PER_ITERATION = 9
+
+
+def _timed(iteration, state):
+    start = time.perf_counter()
+    state, metrics = jax.block_until_ready(iteration(state))
+    return state, metrics, time.perf_counter() - start
+
+
+def bench_case(case: str, device_counts, repeats: int) -> dict:
+    defaults = DEFAULTS[case]
+    config = ParsConfig(directions=defaults["directions"], top=defaults["top"],
+                        decay=defaults["decay"], tasks_per_iteration=TASKS_PER_ITERATION)
+    hidden = tuple(int(h) for h in defaults["hidden"].split(","))
+    rollouts = 2 * config.directions * config.tasks_per_iteration
+    result = {"case": case, "policy": defaults["policy"], "hidden": list(hidden),
+              "directions": config.directions, "top": config.top,
+              "tasks_per_iteration": config.tasks_per_iteration,
+              "rollouts_per_iteration": rollouts, "runs": []}
+    for n_dev in device_counts:
+        mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
+        start = time.perf_counter()
+        iteration, policy, _ = build(case, defaults["policy"], hidden, 1, config, mesh=mesh)
+        build_s = time.perf_counter() - start
+        state, _, first = _timed(iteration, init_state(policy, config))
+        warm = []
+        for _ in range(repeats):
+            state, metrics, wall = _timed(iteration, state)
+            warm.append(wall)
+        row = {"devices": n_dev, "build_s": round(build_s, 2), "first_call_s": round(first, 2),
+               "s_per_iteration": round(min(warm), 2),
+               "rollouts_per_s": round(rollouts / min(warm), 1),
+               "reward_mean_last": round(float(metrics["reward_mean"]), 1)}
+        print(case, row, flush=True)
+        result["runs"].append(row)
+    return result
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--cases", nargs="*", default=list(DEFAULTS), choices=list(DEFAULTS))
+    parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--out", default="bench_results/train.json")
+    args = parser.parse_args(argv)
+    if max(args.devices) > len(jax.devices()):
+        parser.error(f"--devices {max(args.devices)}: only {len(jax.devices())} available")
+    report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
+              "backend": jax.default_backend(), "devices": len(jax.devices()),
+              "episode_s": 10.0,
+              "cases": [bench_case(c, args.devices, args.repeats) for c in args.cases]}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(report, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
