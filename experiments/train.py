@@ -5,6 +5,8 @@ defaults; every hyper-parameter has a flag. Output folder DIR:
   metrics.jsonl   one line per iteration: iteration, reward_mean, reward_max, wall_s, rollouts
   checkpoints/    orbax checkpoints every --checkpoint-every iterations and at the end
   policy/         the trained policy (experiments.evaluate --controller policy:DIR/policy)
+  policies/NNNNN/ the policy after iteration NNNNN, at every checkpoint (all kept: the last
+                  is not always the one that generalises best to the test tasks)
   learning_curve.png
 `--resume` continues from the last checkpoint; `--iterations` is the run's total.
 Multi-host: --coordinator HOST:PORT --num-processes P --process-id I, or --distributed alone
@@ -146,8 +148,10 @@ def _train(case: str, args) -> int:
         bar.set_postfix(mean=f"{row['reward_mean']:.1f}", best=f"{row['reward_max']:.1f}",
                         s_per_it=f"{wall:.2f}")
         bar.update(1)
-        checkpoint.save(mgr, state, {"metrics": log, **run_info},
-                        force=done == args.iterations)
+        last = done == args.iterations
+        checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last)
+        if primary and (done % args.checkpoint_every == 0 or last):
+            checkpoint.save_policy(out / "policies" / f"{done:05d}", spec, state, run_info)
     bar.close()
     if primary:
         checkpoint.save_policy(out / "policy", spec, state, run_info)

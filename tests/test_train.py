@@ -101,6 +101,10 @@ def test_saved_policy_evaluates_and_resume_needs_a_checkpoint(straight, tmp_path
     result = evaluate("ieee39_fidvr", f"policy:{straight / 'policy'}", "train")
     assert result["summary"]["n_tasks"] == 9
     assert (straight / "learning_curve.png").is_file()
+    kept = sorted(p.name for p in (straight / "policies").iterdir())
+    assert kept == ["00003", "00006", "00009", "00012"], "a policy at every checkpoint"
+    last, final = (np.load(straight / d / "policy.npz") for d in ("policies/00012", "policy"))
+    np.testing.assert_array_equal(last["theta"], final["theta"])
     assert main("ieee39_fidvr", DEFAULTS, TINY + ["--resume", "--out", str(tmp_path)]) == 2
     assert "no checkpoint" in capsys.readouterr().err
 
