@@ -52,7 +52,3 @@ def merge(stats: RunningStats, count, total, total_sq) -> RunningStats:
     return RunningStats(count=n, mean=stats.mean + delta * share,
                         m2=stats.m2 + batch_m2 + delta ** 2 * stats.count * share)
 
-
-def normalize(stats: RunningStats, obs):
-    """(obs − mean) / std."""
-    return (obs - stats.mean) / stats.std

@@ -50,12 +50,12 @@ class _Network(nn.Module):
 
     @nn.compact
     def __call__(self, obs, carry):
-        spec, x = self.spec, obs
-        layers = spec.hidden if spec.kind == "fnn" else spec.hidden[1:]
-        if spec.kind == "linear":
-            layers = ()
+        spec, x, layers = self.spec, obs, ()
+        if spec.kind == "fnn":
+            layers = spec.hidden
         if spec.kind == "lstm":
             carry, x = nn.OptimizedLSTMCell(spec.hidden[0])(carry, x)
+            layers = spec.hidden[1:]
         for width in layers:
             x = jnp.tanh(nn.Dense(width)(x))
         u = nn.Dense(spec.action_size)(x)

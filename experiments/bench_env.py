@@ -26,14 +26,14 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
 from experiments.bench_sim import _timed  # noqa: E402
 from experiments.evaluate import no_control  # noqa: E402
 from jaxgrid import cases  # noqa: E402
-from jaxgrid.env import EnvConfig, LoadSheddingEnv, study_params  # noqa: E402
-from jaxgrid.tasks import task_batch, task_set  # noqa: E402
+from jaxgrid.env import LoadSheddingEnv, study_params  # noqa: E402
+from jaxgrid.tasks import study_task_set, task_batch  # noqa: E402
 
 
 def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
     study = cases.load(name)
-    env = LoadSheddingEnv(study.compile(), EnvConfig.for_study(study))
-    specs = task_set(name.removesuffix("_fidvr") + "_train")
+    env = LoadSheddingEnv.for_study(study)
+    specs = study_task_set(name, "train")
     apply, params, carry = no_control(env)
     run = jax.jit(env.rollout, static_argnums=0)
     result = {"case": name, "dt_s": study.dt, "agent_steps": env.config.n_steps, "runs": []}

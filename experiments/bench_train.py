@@ -29,16 +29,12 @@ from jax.sharding import Mesh  # noqa: E402
 
 from ars.pars import ParsConfig, init_state  # noqa: E402
 from experiments import train_39bus, train_300bus  # noqa: E402
+from experiments.bench_sim import _timed  # noqa: E402
 from experiments.train import build  # noqa: E402
 
 DEFAULTS = {"ieee39_fidvr": train_39bus.DEFAULTS, "ieee300_fidvr": train_300bus.DEFAULTS}
 TASKS_PER_ITERATION = 9
-
-
-def _timed(iteration, state):
-    start = time.perf_counter()
-    state, metrics = jax.block_until_ready(iteration(state))
-    return state, metrics, time.perf_counter() - start
+EPISODE = 10.0  # s
 
 
 def bench_case(case: str, device_counts, repeats: int) -> dict:
@@ -54,12 +50,14 @@ def bench_case(case: str, device_counts, repeats: int) -> dict:
     for n_dev in device_counts:
         mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
         start = time.perf_counter()
-        iteration, policy, _ = build(case, defaults["policy"], hidden, 1, config, mesh=mesh)
+        iteration, policy, _ = build(case, defaults["policy"], hidden, 1, config, EPISODE,
+                                     mesh=mesh)
         build_s = time.perf_counter() - start
-        state, _, first = _timed(iteration, init_state(policy, config))
+        state = init_state(policy, config)
+        (state, _), first = _timed(lambda: iteration(state))
         warm = []
         for _ in range(repeats):
-            state, metrics, wall = _timed(iteration, state)
+            (state, metrics), wall = _timed(lambda: iteration(state))
             warm.append(wall)
         row = {"devices": n_dev, "build_s": round(build_s, 2), "first_call_s": round(first, 2),
                "s_per_iteration": round(min(warm), 2),
@@ -81,7 +79,7 @@ def main(argv=None) -> None:
         parser.error(f"--devices {max(args.devices)}: only {len(jax.devices())} available")
     report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
               "backend": jax.default_backend(), "devices": len(jax.devices()),
-              "episode_s": 10.0,
+              "episode_s": EPISODE,
               "cases": [bench_case(c, args.devices, args.repeats) for c in args.cases]}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(report, indent=2))

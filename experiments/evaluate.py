@@ -21,9 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid import cases
-from jaxgrid.env import EnvConfig, LoadSheddingEnv, study_params
+from jaxgrid.env import LoadSheddingEnv, study_params
 from jaxgrid.recovery import envelope
-from jaxgrid.tasks import task_batch, task_set
+from jaxgrid.tasks import study_task_set, task_batch
 
 
 def no_control(env: LoadSheddingEnv):
@@ -32,17 +32,25 @@ def no_control(env: LoadSheddingEnv):
     return (lambda params, obs, carry: (jnp.zeros(n), carry)), None, None
 
 
-def controller(spec: str, env: LoadSheddingEnv):
-    """(policy_apply, params, carry) for "none", "uvls" or "policy:PATH"."""
+def saved_policy(control: str):
+    """(Policy, (θ, mean, std), info) of a "policy:PATH" controller, read once; else None."""
+    if not control.startswith("policy:"):
+        return None
+    from ars.checkpoint import load_policy
+    return load_policy(control.removeprefix("policy:"))
+
+
+def controller(spec: str, env: LoadSheddingEnv, saved=None):
+    """(policy_apply, params, carry) for "none", "uvls" or "policy:PATH" (`saved`: that
+    policy as `saved_policy` returns it, read from PATH if not given)."""
     if spec == "none":
         return no_control(env)
     if spec == "uvls":
         from baselines.uvls import uvls_policy
         return uvls_policy(env)
     if spec.startswith("policy:"):
-        from ars.checkpoint import load_policy
         from ars.pars import initial_carry, normalized_policy
-        policy, params, _ = load_policy(spec.removeprefix("policy:"))
+        policy, params, _ = saved or saved_policy(spec)
         if policy.spec.obs_size != env.config.history * env.obs_size:
             raise ValueError(f"{spec}: the policy observes {policy.spec.obs_size} values, this "
                              f"environment gives {env.config.history * env.obs_size}")
@@ -50,31 +58,23 @@ def controller(spec: str, env: LoadSheddingEnv):
     raise ValueError(f"--controller {spec!r}: allowed none, uvls or policy:PATH")
 
 
-def _history(control: str) -> int:
-    """Observations stacked: what a saved policy was trained with, else 1."""
-    if not control.startswith("policy:"):
-        return 1
-    info = Path(control.removeprefix("policy:")) / "policy.json"
-    return int(json.loads(info.read_text()).get("history", 1)) if info.is_file() else 1
-
-
 def evaluate(case: str, control: str, tasks: str, operating_points=(1.0,), plot_dir=None,
              plot_count: int = 3) -> dict:
     """The results dict of the module docstring (and figures in plot_dir)."""
-    base = case.removesuffix("_fidvr")
-    specs = task_set(f"{base}_{tasks}", operating_points)
+    specs = study_task_set(case, tasks, operating_points)
+    saved = saved_policy(control)
+    history = int(saved[2].get("history", 1)) if saved else 1  # as the policy was trained
     rows, figures = [], []
     for point in operating_points:
         study = cases.load(case, load_level=point)
-        env = LoadSheddingEnv(study.compile(),
-                              EnvConfig.for_study(study, history=_history(control)))
+        env = LoadSheddingEnv.for_study(study, history=history)
         params = study_params(case)
         unchecked = env.unchecked_buses(params)
         if unchecked:
             print(f"{study.name}: observed buses {list(unchecked)} sit below the recovery level "
                   "before any fault; the recovery check leaves them out")
         chosen = [s for s in specs if s.operating_point == point]
-        apply, policy_params, carry = controller(control, env)
+        apply, policy_params, carry = controller(control, env, saved)
         run = jax.jit(env.rollout, static_argnums=0, static_argnames="trace")
         out = run(apply, policy_params, task_batch(env.model, chosen), params, carry,
                   trace=plot_dir is not None)

@@ -78,17 +78,16 @@ def build(case: str, policy_kind: str, hidden: tuple[int, ...], history: int,
     from ars.pars import make_iteration
     from ars.policies import Policy, PolicySpec
     from jaxgrid import cases
-    from jaxgrid.env import EnvConfig, LoadSheddingEnv, study_params
-    from jaxgrid.tasks import task_batch, task_set
+    from jaxgrid.env import LoadSheddingEnv, study_params
+    from jaxgrid.tasks import study_task_set, task_batch
 
-    study = cases.load(case, load_level=load_level)
-    env = LoadSheddingEnv(study.compile(), EnvConfig.for_study(study, history=history,
-                                                                episode=episode))
+    env = LoadSheddingEnv.for_study(cases.load(case, load_level=load_level), history=history,
+                                    episode=episode)
     params = study_params(case)
     spec = PolicySpec(policy_kind, history * env.obs_size, len(env.action_slots), hidden,
                       float(params.action_low), float(params.action_high))
     policy = Policy(spec)
-    tasks = task_batch(env.model, task_set(case.removesuffix("_fidvr") + "_train"))
+    tasks = task_batch(env.model, study_task_set(case, "train"))
     iteration = make_iteration(
         lambda apply, pp, task, carry: env.episode(apply, pp, task, params, carry),
         policy, config, tasks, mesh)

@@ -1,6 +1,6 @@
 """The FIDVR load-shedding environment of the PNNL PARS study, functional and jittable.
 
-    env = LoadSheddingEnv(model, EnvConfig.for_study(study))
+    env = LoadSheddingEnv.for_study(study)   # or LoadSheddingEnv(model, EnvConfig(...))
     obs, state = env.reset(key, task, params)
     obs, state, reward, done, info = env.step(state, action, params)
 
@@ -188,6 +188,12 @@ class LoadSheddingEnv:
         self.observed = np.array([model.bus_index(b) for b in config.observed_buses])
         self.action_slots = np.array([model.load_slot(b) for b in config.action_buses])
 
+    @classmethod
+    def for_study(cls, study, **config) -> LoadSheddingEnv:
+        """The environment of a built-in `StudyCase` (compiled with its default options);
+        `config` overrides `EnvConfig` fields, e.g. episode=6.0 (s), history=3."""
+        return cls(study.compile(), EnvConfig.for_study(study, **config))
+
     def unchecked_buses(self, params: EnvParams) -> tuple[int, ...]:
         """Observed buses below the recovery level before any fault: shedding cannot recover
         them, so the recovery check leaves them out (they still count in the reward)."""
@@ -235,8 +241,8 @@ class LoadSheddingEnv:
         vm, obs = self._observe(grid, t_next, task, fault)
         after = t_next - task.fault_end
         failed = recovery_failed(vm, state.recovery_check, after, params) | health.diverged
-        reward = (params.c_voltage * envelope_deviation(vm, after)
-                  - params.c_shed * shed_power(amount, self.model.load_p0[self.action_slots])
+        shed = shed_power(amount, self.model.load_p0[self.action_slots])
+        reward = (params.c_voltage * envelope_deviation(vm, after) - params.c_shed * shed
                   - params.c_invalid * invalid_requests(request, left)
                   - params.c_prefault * prefault_requests(request, t, task.fault_start))
         reward = jnp.where(failed, -params.unstable_penalty, reward)
@@ -246,7 +252,7 @@ class LoadSheddingEnv:
         new = EnvState(grid=grid, health=health, task=task, step=state.step + 1,
                        history=history, recovery_check=state.recovery_check, done=done)
         info = {"terminated": failed, "truncated": truncated & ~failed,
-                "shed_pu": shed_power(amount, self.model.load_p0[self.action_slots]),
+                "shed_pu": shed,
                 "diverged": health.diverged}
         return history.reshape(-1), new, reward, done, info
 

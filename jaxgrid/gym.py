@@ -14,7 +14,7 @@ Keyword arguments of `gymnasium.make` go to the constructor, e.g.
 `gymnasium.make("jaxgrid/IEEE39-FIDVR-v0", load_level=1.2, config={"episode": 6.0})`.
 
 Every `reset` draws one task from the constructor's `tasks` (default: the study's training
-faults, `jaxgrid.tasks.task_set("ieee39_train")` or `"ieee300_train"`) with the env's seeded
+faults, `jaxgrid.tasks.study_task_set(case, "train")`) with the env's seeded
 `np_random`, or takes `options={"task": FaultEvent | None}`. One episode is one task; the
 observation, action, reward, `terminated` (recovery failed or the simulation diverged) and
 `truncated` (episode length reached) are those of `LoadSheddingEnv` (see its module docstring
@@ -35,23 +35,22 @@ import numpy as np
 from gymnasium import spaces
 
 from jaxgrid import cases
-from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv, study_params
+from jaxgrid.env import EnvParams, LoadSheddingEnv, study_params
 from jaxgrid.simulate import FaultEvent, make_task
 
 # Registered ids -> the built-in study case they wrap.
 ENV_IDS = {"jaxgrid/IEEE39-FIDVR-v0": "ieee39_fidvr", "jaxgrid/IEEE300-FIDVR-v0": "ieee300_fidvr"}
-# Default task set (jaxgrid.tasks.TASK_SETS) per study case.
-TRAINING_SETS = {"ieee39_fidvr": "ieee39_train", "ieee300_fidvr": "ieee300_train"}
 
 
 def training_faults(case: str) -> list[FaultEvent | None]:
     """The study's training faults of a built-in case (None: the no-fault task)."""
-    from jaxgrid.tasks import task_set
+    from jaxgrid.tasks import study_task_set
 
-    if case not in TRAINING_SETS:
-        raise ValueError(f"case {case!r} has no default task set (known: "
-                         f"{', '.join(TRAINING_SETS)}); pass tasks=[FaultEvent | None, ...]")
-    return [spec.event() for spec in task_set(TRAINING_SETS[case])]
+    try:
+        specs = study_task_set(case, "train")
+    except ValueError as err:
+        raise ValueError(f"{err}; pass tasks=[FaultEvent | None, ...]") from None
+    return [spec.event() for spec in specs]
 
 
 class LoadSheddingGymEnv(gymnasium.Env):
@@ -86,10 +85,8 @@ class LoadSheddingGymEnv(gymnasium.Env):
     def __init__(self, case: str = "ieee39_fidvr", load_level: float = 1.0,
                  tasks: Sequence[FaultEvent | None] | None = None,
                  config: Mapping[str, Any] | None = None, params: EnvParams | None = None):
-        study = cases.load(case, load_level=load_level)
-        model = study.compile()
-        self.study = study
-        self.env = LoadSheddingEnv(model, EnvConfig.for_study(study, **dict(config or {})))
+        self.study = cases.load(case, load_level=load_level)
+        self.env = LoadSheddingEnv.for_study(self.study, **dict(config or {}))
         self.params = params if params is not None else study_params(case)
         self.tasks = tuple(training_faults(case) if tasks is None else tasks)
         if not self.tasks:
@@ -99,7 +96,7 @@ class LoadSheddingGymEnv(gymnasium.Env):
                 raise ValueError(f"tasks[{k}] = {fault!r} ({type(fault).__name__}): must be a "
                                  "FaultEvent or None")
         self._task_arrays = [make_task(self.env.model, f) for f in self.tasks]
-        self._x64 = model.precision == "float64"
+        self._x64 = self.env.model.precision == "float64"
 
         cfg, n_observed = self.env.config, len(self.env.observed)
         one_low = np.zeros(self.env.obs_size, np.float32)

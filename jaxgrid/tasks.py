@@ -1,7 +1,8 @@
 """Task sets of the PARS study and task configuration files.
 
 A task is data: fault bus, start, duration, impedance and operating point (`TaskSpec`).
-`task_set(name)` gives the study's named sets; `task_batch(model, specs)` turns specs of
+`task_set(name)` gives the study's named sets, `study_task_set(case, "train" | "test")` those
+of a built-in study case; `task_batch(model, specs)` turns specs of
 one operating point into a stacked `simulate.Task` for a vmapped rollout.
 
 `read_task_config(path, case)` reads the original PNNL task files (RLGC/HADREC JSON with
@@ -75,6 +76,17 @@ def task_set(name: str, operating_points: Sequence[float] = (1.0,)) -> list[Task
         raise ValueError(f"unknown task set {name!r}; known: {', '.join(TASK_SETS)}")
     buses, durations = TASK_SETS[name]
     return grid_of(buses, durations, operating_points)
+
+
+def study_task_set(case: str, split: str,
+                   operating_points: Sequence[float] = (1.0,)) -> list[TaskSpec]:
+    """The study's "train" or "test" set of a built-in study case ("ieee39_fidvr" ->
+    TASK_SETS["ieee39_train"] / ["ieee39_test"])."""
+    name = f"{case.removesuffix('_fidvr')}_{split}"
+    if not case.endswith("_fidvr") or name not in TASK_SETS:
+        raise ValueError(f"case {case!r} has no default task set {split!r} (known: the "
+                         "cases ieee39_fidvr and ieee300_fidvr, the sets train and test)")
+    return task_set(name, operating_points)
 
 
 def task_batch(model: GridModel, specs: Sequence[TaskSpec]) -> Task:

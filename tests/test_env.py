@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 
 from jaxgrid import cases
-from jaxgrid.env import (EnvConfig, EnvParams, LoadSheddingEnv, envelope_deviation,
-                         invalid_requests, prefault_requests, recovery_failed, shed_power,
-                         study_params)
+from jaxgrid.env import (EnvParams, LoadSheddingEnv, envelope_deviation, invalid_requests,
+                         prefault_requests, recovery_failed, shed_power, study_params)
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 
 
@@ -52,7 +51,7 @@ def test_recovery_check_by_hand():
 @pytest.fixture(scope="module")
 def env():
     study = cases.load("ieee39_fidvr")
-    return LoadSheddingEnv(study.compile(), EnvConfig.for_study(study, episode=6.0))
+    return LoadSheddingEnv.for_study(study, episode=6.0)
 
 
 @pytest.fixture(scope="module")

@@ -28,7 +28,7 @@ def study():
 
 @pytest.fixture(scope="module")
 def env(study):
-    return LoadSheddingEnv(study.compile(), EnvConfig.for_study(study, episode=6.0))
+    return LoadSheddingEnv.for_study(study, episode=6.0)
 
 
 @pytest.fixture(scope="module")
