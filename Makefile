@@ -10,8 +10,8 @@ install:  ## create .venv and install the project with its test extras
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install -e ".[test]"
 
-run:  ## the main job on the built-in default case
-	$(PY) -m jaxgrid.powerflow --case ieee39 --out results/ieee39_powerflow.json
+run:  ## the main job on the built-in default case: PARS training on the 39-bus FIDVR study
+	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.train_39bus --out runs/ieee39
 
 test:  ## the test suite (2 simulated CPU devices, see tests/conftest.py)
 	$(PY) -m pytest -q

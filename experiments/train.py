@@ -107,14 +107,16 @@ def _train(case: str, args) -> int:
                         tasks_per_iteration=args.tasks_per_iteration, seed=args.seed)
     if args.iterations < 1 or args.checkpoint_every < 1:
         raise ValueError("--iterations and --checkpoint-every must be >= 1")
-    iteration, policy, spec = build(case, args.policy, hidden, history, config, args.episode,
-                                    args.load_level)
-
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    mgr = checkpoint.manager(out / "checkpoints", args.checkpoint_every)
+    if not args.resume and mgr.latest_step() is not None:
+        raise ValueError(f"{out} already holds a run (checkpoint at iteration "
+                         f"{mgr.latest_step()}): pass --resume to continue it, or another --out")
+    iteration, policy, spec = build(case, args.policy, hidden, history, config, args.episode,
+                                    args.load_level)
     run_info = {"case": case, "load_level": args.load_level, "history": history,
                 "episode": args.episode, "config": dataclasses.asdict(config)}
-    mgr = checkpoint.manager(out / "checkpoints", args.checkpoint_every)
     state, log = init_state(policy, config), []
     if args.resume:
         restored = checkpoint.restore_latest(mgr, state)

@@ -97,7 +97,7 @@ def test_two_processes_on_loopback_match_one_process(tmp_path, straight):
         np.testing.assert_array_equal(a[name], b[name])
 
 
-def test_saved_policy_evaluates_and_resume_needs_a_checkpoint(straight, tmp_path, capsys):
+def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_path, capsys):
     result = evaluate("ieee39_fidvr", f"policy:{straight / 'policy'}", "train")
     assert result["summary"]["n_tasks"] == 9
     assert (straight / "learning_curve.png").is_file()
@@ -107,6 +107,10 @@ def test_saved_policy_evaluates_and_resume_needs_a_checkpoint(straight, tmp_path
     np.testing.assert_array_equal(last["theta"], final["theta"])
     assert main("ieee39_fidvr", DEFAULTS, TINY + ["--resume", "--out", str(tmp_path)]) == 2
     assert "no checkpoint" in capsys.readouterr().err
+    before = (straight / "metrics.jsonl").read_text()
+    assert main("ieee39_fidvr", DEFAULTS, TINY + ["--out", str(straight)]) == 2
+    assert "pass --resume" in capsys.readouterr().err
+    assert (straight / "metrics.jsonl").read_text() == before, "a fresh run loses nothing"
 
 
 def test_short_300_bus_run_goes_through_the_full_path(tmp_path):
