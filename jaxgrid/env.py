@@ -30,7 +30,7 @@ from flax import struct
 from jaxgrid import network
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
-from jaxgrid.simulate import Bounds, Health, Task, advance, healthy, observe
+from jaxgrid.simulate import Bounds, Health, Task, advance, healthy, observe, shed
 
 
 @struct.dataclass
@@ -233,7 +233,7 @@ class LoadSheddingEnv:
         request = -jnp.clip(action, params.action_low, params.action_high)  # >= 0
         left = state.grid.load_left[self.action_slots]
         amount = jnp.minimum(request, left)
-        grid = state.grid.replace(load_left=state.grid.load_left.at[self.action_slots].add(-amount))
+        grid = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
         fault = self._fault(task)
         grid, health = advance(self.model, grid, state.health, state.step * cfg.sim_steps,
                                cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
@@ -241,8 +241,8 @@ class LoadSheddingEnv:
         vm, obs = self._observe(grid, t_next, task, fault)
         after = t_next - task.fault_end
         failed = recovery_failed(vm, state.recovery_check, after, params) | health.diverged
-        shed = shed_power(amount, self.model.load_p0[self.action_slots])
-        reward = (params.c_voltage * envelope_deviation(vm, after) - params.c_shed * shed
+        shed_pu = shed_power(amount, self.model.load_p0[self.action_slots])
+        reward = (params.c_voltage * envelope_deviation(vm, after) - params.c_shed * shed_pu
                   - params.c_invalid * invalid_requests(request, left)
                   - params.c_prefault * prefault_requests(request, t, task.fault_start))
         reward = jnp.where(failed, -params.unstable_penalty, reward)
@@ -252,7 +252,7 @@ class LoadSheddingEnv:
         new = EnvState(grid=grid, health=health, task=task, step=state.step + 1,
                        history=history, recovery_check=state.recovery_check, done=done)
         info = {"terminated": failed, "truncated": truncated & ~failed,
-                "shed_pu": shed,
+                "shed_pu": shed_pu,
                 "diverged": health.diverged}
         return history.reshape(-1), new, reward, done, info
 

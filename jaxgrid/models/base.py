@@ -141,10 +141,11 @@ def lead_lag_output(x: Array, u: Array, t_lead: Array, t_lag: Array) -> Array:
     return jnp.where(t_lag > 0, ratio * u + (1.0 - ratio) * x, u)
 
 
-def quadratic_saturation(x: Array, a: Array, b: Array) -> Array:
-    """PSS/E quadratic saturation factor Se(x) = b (x − a)² / x for x > a, else 0."""
-    xs = jnp.where(x > a, x, a + 1.0)
-    return jnp.where(x > a, b * (xs - a) ** 2 / jnp.maximum(xs, 1e-6), 0.0)
+def quadratic_saturation(x: Array, a: Array, b: Array, xp=jnp) -> Array:
+    """PSS/E quadratic saturation factor Se(x) = b (x − a)² / x for x > a, else 0
+    (xp = numpy for host-side initialisation)."""
+    xs = xp.where(x > a, x, a + 1.0)
+    return xp.where(x > a, b * (xs - a) ** 2 / xp.maximum(xs, 1e-6), 0.0)
 
 
 def quadratic_saturation_constants(x1, s1, x2, s2) -> tuple[np.ndarray, np.ndarray]:

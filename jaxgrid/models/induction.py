@@ -45,11 +45,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
+from jaxgrid.models.acmotor import MotorOptions
 from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, ModelError, Params, States,
                                  device_label, quadratic_saturation,
                                  quadratic_saturation_constants, safe, saturation_problem)
 
-STIFF_BELOW_DEFAULT = 0.01  # s: T''0 below it drops the second cage (2 × a 5 ms step)
 SLIP_MIN = 1e-7             # smallest slip of the initialisation bracket (spec §5)
 SLIP_GRID = 700             # log-spaced slips in [SLIP_MIN, 1] scanned for breakdown
 BISECTIONS = 100            # halvings of the slip bracket (below float64 resolution)
@@ -168,7 +168,7 @@ class Cim5bl(LoadModel):
         Q of its equivalent circuit. options.stiff_below (s): see the module docstring.
         Raises ModelError naming the unit when the motor cannot carry its load at V0.
         """
-        stiff_below = getattr(options, "stiff_below", STIFF_BELOW_DEFAULT)
+        stiff_below = (options or MotorOptions()).stiff_below
         p = {k: np.asarray(v, dtype=float) for k, v in p.items()}
         n = p["ra"].shape[0]
         v0 = np.asarray(site.v0, dtype=complex)
@@ -382,7 +382,7 @@ def steady_state(c: dict, s, vmag):
     def residual(se):
         alpha, beta, z = steady_impedance(c, s, se)
         epp = np.abs(c["k5"] * alpha + c["k4"] * beta) * vmag / np.abs(z)
-        return _saturation_np(epp, c["sat_a"], c["sat_b"]) - se
+        return quadratic_saturation(epp, c["sat_a"], c["sat_b"], xp=np) - se
 
     if not np.any(c["sat_b"] > 0):
         return (*steady_impedance(c, s, 0.0), 0.0)
@@ -394,12 +394,6 @@ def steady_state(c: dict, s, vmag):
         lo, hi = np.where(up, mid, lo), np.where(up, hi, mid)
     se = 0.5 * (lo + hi)
     return (*steady_impedance(c, s, se), se)
-
-
-def _saturation_np(x, a, b):
-    """NumPy float64 twin of `quadratic_saturation`: b (x − a)² / x for x > a, else 0."""
-    xs = np.where(x > a, x, a + 1.0)
-    return np.where(x > a, b * (xs - a) ** 2 / np.maximum(xs, 1e-6), 0.0)
 
 
 def _torque_and_power(c: dict, s, vmag):
