@@ -113,6 +113,9 @@ def _train(case: str, args) -> int:
     if not args.resume and mgr.latest_step() is not None:
         raise ValueError(f"{out} already holds a run (checkpoint at iteration "
                          f"{mgr.latest_step()}): pass --resume to continue it, or another --out")
+    if args.resume and (mgr.latest_step() or 0) > args.iterations:
+        raise ValueError(f"--resume: the checkpoint in {out} is at iteration "
+                         f"{mgr.latest_step()}, past --iterations {args.iterations}")
     iteration, policy, spec = build(case, args.policy, hidden, history, config, args.episode,
                                     args.load_level)
     run_info = {"case": case, "load_level": args.load_level, "history": history,

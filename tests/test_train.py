@@ -37,22 +37,40 @@ def straight(tmp_path_factory):
     return out
 
 
+# The killed run hangs before its 8th iteration, so the kill lands at the same point
+# however fast the machine is (a run that reached 12 first would leave nothing to resume).
+HANG_BEFORE_ITERATION_8 = """
+import sys, time
+import experiments.train as train
+from experiments.train_39bus import DEFAULTS
+build = train.build
+def hanging_build(*args, **kwargs):
+    iteration, policy, spec = build(*args, **kwargs)
+    def hang_after_7(state):
+        if int(state.iteration) >= 7:
+            time.sleep(3600)
+        return iteration(state)
+    return hang_after_7, policy, spec
+train.build = hanging_build
+sys.exit(train.main("ieee39_fidvr", DEFAULTS, sys.argv[1:]))
+"""
+
+
 def test_sigkill_mid_training_resumes_and_matches_an_uninterrupted_run(tmp_path, straight):
     out = tmp_path / "killed"
     metrics = out / "metrics.jsonl"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    proc = subprocess.Popen([sys.executable, "-m", "experiments.train_39bus", *TINY,
+    proc = subprocess.Popen([sys.executable, "-c", HANG_BEFORE_ITERATION_8, *TINY,
                              "--iterations", "1000", "--out", str(out)], cwd=REPO, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 300
-    while len(_lines(metrics)) < 8 and time.time() < deadline and proc.poll() is None:
+    while len(_lines(metrics)) < 7 and time.time() < deadline and proc.poll() is None:
         time.sleep(0.2)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    reached = len(_lines(metrics))
-    assert reached >= 8, "the run did not get going"
+    assert len(_lines(metrics)) == 7, "the run did not get going"
     kept = [int(p.name) for p in (out / "checkpoints").iterdir() if p.name.isdigit()]
-    assert reached - max(kept) <= 3, f"killed after {reached}, last checkpoint {max(kept)}"
+    assert max(kept) == 6, f"killed after 7 iterations, last checkpoint {max(kept)}"
     assert main("ieee39_fidvr", DEFAULTS, TINY + ["--iterations", "12", "--resume",
                                                   "--out", str(out)]) == 0
     rows = [json.loads(line) for line in _lines(metrics)]
@@ -107,6 +125,9 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
     np.testing.assert_array_equal(last["theta"], final["theta"])
     assert main("ieee39_fidvr", DEFAULTS, TINY + ["--resume", "--out", str(tmp_path)]) == 2
     assert "no checkpoint" in capsys.readouterr().err
+    assert main("ieee39_fidvr", DEFAULTS, TINY + ["--resume", "--iterations", "6",
+                                                  "--out", str(straight)]) == 2
+    assert "past --iterations 6" in capsys.readouterr().err
     before = (straight / "metrics.jsonl").read_text()
     assert main("ieee39_fidvr", DEFAULTS, TINY + ["--out", str(straight)]) == 2
     assert "pass --resume" in capsys.readouterr().err
