@@ -39,8 +39,9 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def motor_shares(model, traj):
-    """(running, stalled, off) (n_t,) shares of all ACMTBLU1 motors, weighted by motor MVA."""
-    totals = np.zeros((3, len(traj.t)))
+    """(running, stalled, off) shares of all ACMTBLU1 motors, weighted by motor MVA: (3, n_t),
+    or (3, batch, n_t) for a batch trajectory."""
+    totals = np.zeros((3, *np.shape(traj.t)))
     weight = 0.0
     for group, flags in zip(model.loads, traj.load_flags):
         if group.model is not Acmtblu1:
@@ -52,17 +53,17 @@ def motor_shares(model, traj):
     return totals / max(weight, 1e-12)
 
 
-def draw(study, model, traj, fault: FaultEvent, path: str) -> None:
-    """Write the two-panel FIDVR figure to `path`."""
+def draw(study, model, t: np.ndarray, vm: np.ndarray, shares: np.ndarray, fault: FaultEvent,
+         path: str) -> None:
+    """Write the two-panel FIDVR figure to `path`: voltages vm (n_t, n_bus) p.u. at times
+    t (n_t,) s, and motor shares (3, n_t) from `motor_shares`."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t = np.asarray(traj.t)
     cleared = fault.start + fault.duration
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 7), sharex=True,
                                       gridspec_kw={"height_ratios": [2, 1]})
-    vm = np.asarray(traj.vm)
     for bus in study.observed_buses:
         top.plot(t, vm[:, model.bus_index(bus)], lw=1, label=f"bus {bus}")
     fine = np.linspace(0, t[-1], 2000)
@@ -74,8 +75,7 @@ def draw(study, model, traj, fault: FaultEvent, path: str) -> None:
                   "no control")
     top.legend(ncol=4, fontsize=7, loc="lower right")
     top.grid(alpha=0.3)
-    running, stalled, off = motor_shares(model, traj)
-    bottom.stackplot(t, running, stalled, off, labels=["running", "stalled", "off"],
+    bottom.stackplot(t, *shares, labels=["running", "stalled", "off"],
                      colors=["tab:green", "tab:red", "tab:gray"], alpha=0.8)
     bottom.set_ylabel("A/C motors (share of MVA)")
     bottom.set_xlabel("time (s)")
@@ -99,12 +99,14 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    draw(study, model, traj, fault, args.out)
-    t = np.asarray(traj.t)
-    k = int(np.argmin(np.abs(t - (fault.start + fault.duration + 4.0))))
-    observed = np.asarray(traj.vm)[k, [model.bus_index(b) for b in study.observed_buses]]
-    running, stalled, off = motor_shares(model, traj)
-    print(f"{args.out}: lowest observed voltage 4 s after clearing {observed.min():.3f} p.u.; "
+    t, vm, shares = np.asarray(traj.t), np.asarray(traj.vm), motor_shares(model, traj)
+    draw(study, model, t, vm, shares, fault, args.out)
+    judged = fault.start + fault.duration + 4.0
+    k = min(int(np.searchsorted(t, judged - 1e-6)), len(t) - 1)
+    when = "4 s after clearing" if t[k] >= judged - 1e-6 else f"at the end ({t[k]:.2f} s)"
+    observed = vm[k, [model.bus_index(b) for b in study.observed_buses]]
+    running, stalled, off = shares
+    print(f"{args.out}: lowest observed voltage {when} {observed.min():.3f} p.u.; "
           f"motors at the end: {running[-1]:.0%} running, {stalled[-1]:.0%} stalled, "
           f"{off[-1]:.0%} off" + (" (DIVERGED)" if bool(traj.diverged) else ""))
     return 0

@@ -88,7 +88,7 @@ from jaxgrid.models.base import DeviceModel
 from jaxgrid.models.exciters import Ieeet1
 from jaxgrid.models.governors import Hygov, Tgov1
 from jaxgrid.models.machines import Genrou
-from jaxgrid.powerflow import solve
+from jaxgrid.powerflow import bus_loads, solve
 
 if TYPE_CHECKING:
     from jaxgrid.compile import CompileOptions
@@ -270,27 +270,13 @@ def _ieee300_base() -> tuple[Case, tuple[int, ...]]:
     number = case.buses.number
     zone1_hv = tuple(int(b) for b, z, kv in zip(number, case.buses.zone, case.buses.base_kv)
                      if z == OBSERVED_ZONE_300 and kv > OBSERVED_MIN_KV_300)
-    p, q = _bus_load_mva(case)
-    x = {bus: LOAD_XFMR_X_OWN_BASE * case.base_mva / math.hypot(p[bus], q[bus])
-         for bus in MOTOR_BUSES_300}
+    load_mva = np.abs(sum(bus_loads(case))) * case.base_mva
+    x = dict(zip(MOTOR_BUSES_300, LOAD_XFMR_X_OWN_BASE * case.base_mva
+                 / load_mva[case.bus_index(MOTOR_BUSES_300)]))
     case = move_loads_behind_transformers(case, MOTOR_BUSES_300, offset=LOAD_BUS_OFFSET_300, x=x)
     case, _ = _with_machine_bases(case, lambda bus, m: KUNDUR_GENROU["xppd"])
     observed = zone1_hv + tuple(LOAD_BUS_OFFSET_300 + b for b in MOTOR_BUSES_300)
     return case, observed
-
-
-def _bus_load_mva(case: Case) -> tuple[dict[int, float], dict[int, float]]:
-    """Load P and Q per bus number at 1 p.u. voltage, MW and Mvar."""
-    ld = case.loads
-    p: dict[int, float] = {}
-    q: dict[int, float] = {}
-    for k in np.flatnonzero(ld.in_service):
-        bus = int(case.buses.number[ld.bus[k]])
-        p[bus] = p.get(bus, 0.0) + case.base_mva * (ld.p_power[k] + ld.p_current[k]
-                                                    + ld.p_impedance[k])
-        q[bus] = q.get(bus, 0.0) + case.base_mva * (ld.q_power[k] + ld.q_current[k]
-                                                    + ld.q_impedance[k])
-    return p, q
 
 
 def _without_q_limits(case: Case) -> Case:
