@@ -20,10 +20,8 @@ import json  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import jax  # noqa: E402
-import numpy as np  # noqa: E402
-from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
 
-from experiments.bench_sim import _timed  # noqa: E402
+from experiments.bench_sim import sharded_timings  # noqa: E402
 from experiments.evaluate import no_control  # noqa: E402
 from jaxgrid import cases  # noqa: E402
 from jaxgrid.env import LoadSheddingEnv, study_params  # noqa: E402
@@ -37,22 +35,16 @@ def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
     apply, params, carry = no_control(env)
     run = jax.jit(env.rollout, static_argnums=0)
     result = {"case": name, "dt_s": study.dt, "agent_steps": env.config.n_steps, "runs": []}
-    for n_dev in device_counts:
-        mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
-        for batch in batch_sizes:
-            if batch % n_dev:
-                continue
-            tasks = task_batch(env.model, [specs[k % len(specs)] for k in range(batch)])
-            tasks = jax.device_put(tasks, NamedSharding(mesh, PartitionSpec("batch")))
-            go = lambda: run(apply, params, tasks, study_params(name), carry)  # noqa: E731
-            _, first = _timed(go)
-            warm = min(_timed(go)[1] for _ in range(repeats))
-            row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
-                   "warm_s": round(warm, 4),
-                   "agent_steps_per_s": round(batch * env.config.n_steps / warm, 1),
-                   "episodes_per_s": round(batch / warm, 2)}
-            print(name, row, flush=True)
-            result["runs"].append(row)
+    for n_dev, batch, _, first, warm in sharded_timings(
+            batch_sizes, device_counts, repeats,
+            lambda batch: task_batch(env.model, [specs[k % len(specs)] for k in range(batch)]),
+            lambda tasks: run(apply, params, tasks, study_params(name), carry)):
+        row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
+               "warm_s": round(warm, 4),
+               "agent_steps_per_s": round(batch * env.config.n_steps / warm, 1),
+               "episodes_per_s": round(batch / warm, 2)}
+        print(name, row, flush=True)
+        result["runs"].append(row)
     return result
 
 

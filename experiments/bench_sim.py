@@ -70,6 +70,24 @@ def _timed(fn):
     return out, time.perf_counter() - start
 
 
+def sharded_timings(batch_sizes, device_counts, repeats: int, make_tasks, run):
+    """Time `run(tasks)` with `make_tasks(batch)` sharded over a 1-D mesh of the first n
+    devices, for every device count n and every batch size n divides.
+
+    Yields (n, batch, output of the first call, first-call s, best of `repeats` warm calls s).
+    """
+    for n_dev in device_counts:
+        sharding = NamedSharding(Mesh(np.array(jax.devices()[:n_dev]), ("batch",)),
+                                 PartitionSpec("batch"))
+        for batch in batch_sizes:
+            if batch % n_dev:
+                continue
+            tasks = jax.device_put(make_tasks(batch), sharding)
+            out, first = _timed(lambda: run(tasks))
+            warm = min(_timed(lambda: run(tasks))[1] for _ in range(repeats))
+            yield n_dev, batch, out, first, warm
+
+
 def step_compile_seconds(model, dt: float) -> float:
     """Seconds to lower and compile one Heun step of `model` (no run)."""
     task = make_task(model, FaultEvent(model.bus_numbers[0], 1.0, 0.1))
@@ -106,24 +124,17 @@ def bench_case(name: str, batch_sizes, device_counts, repeats: int, with_andes: 
               "step_compile_s": round(step_compile_seconds(model, dt), 3), "runs": []}
     # fault buses: the machines' buses excluded, cycling over the rest
     candidates = [b for b in model.bus_numbers if b > 0 and b not in model.gen_bus]
-    for n_dev in device_counts:
-        devices = jax.devices()[:n_dev]
-        mesh = Mesh(np.array(devices), ("batch",))
-        for batch in batch_sizes:
-            if batch % n_dev:
-                continue
-            tasks = stack_tasks([make_task(model, FaultEvent(candidates[k % len(candidates)],
-                                                             1.0, 0.1)) for k in range(batch)])
-            tasks = jax.device_put(tasks, NamedSharding(mesh, PartitionSpec("batch")))
-            run = lambda: simulate_batch(model, tasks, T_END, dt, decimation)  # noqa: E731
-            out, first = _timed(run)
-            warm = min(_timed(run)[1] for _ in range(repeats))
-            row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
-                   "warm_s": round(warm, 4), "rollouts_per_s": round(batch / warm, 2),
-                   "sim_s_per_wall_s": round(batch * T_END / warm, 1),
-                   "diverged": int(np.sum(np.asarray(out.diverged)))}
-            print(name, row, flush=True)
-            result["runs"].append(row)
+    faults = [make_task(model, FaultEvent(candidates[k % len(candidates)], 1.0, 0.1))
+              for k in range(max(batch_sizes))]
+    for n_dev, batch, out, first, warm in sharded_timings(
+            batch_sizes, device_counts, repeats, lambda batch: stack_tasks(faults[:batch]),
+            lambda tasks: simulate_batch(model, tasks, T_END, dt, decimation)):
+        row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
+               "warm_s": round(warm, 4), "rollouts_per_s": round(batch / warm, 2),
+               "sim_s_per_wall_s": round(batch * T_END / warm, 1),
+               "diverged": int(np.sum(np.asarray(out.diverged)))}
+        print(name, row, flush=True)
+        result["runs"].append(row)
     if with_andes and files:
         try:
             ref = run_andes(*files, T_END, candidates[0], 1.0, 0.1, tstep=dt)
