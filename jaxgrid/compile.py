@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from collections import Counter
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -147,22 +148,23 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     z_source = np.concatenate([g.params["ra"] + 1j * g.params["xs"] for g in machines])
     y_norton = ratio / z_source
     s_load = _bus_load_at(case, pf)
-    motors = _load_model_groups(case, pf, records["load"], load_keys, options, notes)
+    motors = _load_model_groups(case, pf, s_load.real, records["load"], load_keys, options,
+                                notes)
     s_static = s_load.copy()
-    for _, _, buses, p, _, _, s0 in motors:
-        np.add.at(s_static, buses, -s0)
+    for m in motors:
+        np.add.at(s_static, m.buses, -m.s0)
     y_z, s_i, s_p = split_bus_loads(s_static, v0, options.loads)
     y = admittance_matrix(case)
     y[np.diag_indices(case.n_bus)] += y_z + _unmodelled_admittance(case, pf, on, order, notes)
     np.add.at(y, (gen.bus[order], gen.bus[order]), y_norton)
-    for _, _, buses, p, _, _, _ in motors:
-        np.add.at(y, (buses, buses), p["y_norton"])
-    load_bus = _load_buses(case, s_load, options, [b for m in motors for b in m[2]])
+    for m in motors:
+        np.add.at(y, (m.buses, m.buses), m.params["y_norton"])
+    load_bus = _load_buses(case, s_load, options, [b for m in motors for b in m.buses])
     slot_bus = np.concatenate([gen.bus[order], load_bus]).astype(int)
     slot_of = {int(b): k for k, b in enumerate(load_bus)}
     load_groups = tuple(
-        DeviceGroup(params=p, model=model, index=tuple(slot_of[int(b)] for b in buses),
-                    labels=labels) for model, labels, buses, p, _, _, _ in motors)
+        DeviceGroup(params=m.params, model=m.model, index=tuple(slot_of[int(b)] for b in m.buses),
+                    labels=m.labels) for m in motors)
 
     model = GridModel(
         machines=tuple(machines), exciters=exciters, governors=governors, loads=load_groups,
@@ -171,8 +173,8 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
         load_y=y_z[load_bus], load_s_i=s_i[load_bus], load_s_p=s_p[load_bus],
         load_vm0=np.maximum(pf.vm[load_bus], 1e-6), load_p0=s_load[load_bus].real, v0=v0,
         initial=GridState(machines=tuple(m_states), exciters=e_states, governors=g_states,
-                          loads=tuple(m[4] for m in motors),
-                          load_flags=tuple(m[5] for m in motors),
+                          loads=tuple(m.states for m in motors),
+                          load_flags=tuple(m.flags for m in motors),
                           load_left=np.ones(len(load_bus)), v=v0[slot_bus]),
         bus_numbers=tuple(int(b) for b in case.buses.number),
         gen_bus=tuple(int(case.buses.number[gen.bus[g]]) for g in order),
@@ -328,16 +330,25 @@ def _unmodelled_admittance(case, pf, on, order, notes) -> np.ndarray:
     return -np.conj(s) / np.maximum(pf.vm, 1e-6) ** 2
 
 
-def _load_model_groups(case, pf, records, load_keys, options, notes):
-    """[(model, labels, bus indices, params, states, flags, s0)] per load model in use.
+class LoadModelUnits(NamedTuple):
+    """The units of one dynamic load model, initialised at the power flow (n_unit each)."""
 
-    s0 (n_unit,) complex: what each unit draws at the power flow, p.u. system base.
-    """
+    model: type
+    labels: tuple[str, ...]
+    buses: np.ndarray  # bus indices
+    params: dict
+    states: dict
+    flags: dict
+    s0: np.ndarray  # complex power each unit draws at the power flow, p.u. system base
+
+
+def _load_model_groups(case, pf, bus_p, records, load_keys, options,
+                       notes) -> list[LoadModelUnits]:
+    """The units of each load model in use; bus_p (n_bus,) is the load drawn at the power
+    flow, p.u. system base."""
     loads = case.loads
     vm = pf.vm[loads.bus]
     record_p = loads.p_power + loads.p_current * vm + loads.p_impedance * vm ** 2
-    bus_p = np.zeros(case.n_bus)
-    np.add.at(bus_p, loads.bus[loads.in_service], record_p[loads.in_service])
     groups = []
     for name, model in LOAD_MODELS.items():
         rs = [r for r in records if r.model == name]
@@ -352,10 +363,11 @@ def _load_model_groups(case, pf, records, load_keys, options, notes):
         with jax.enable_x64(True):
             p, x, z, s0, report = model.init(model.read(rs), site, options.motors)
         notes.extend(f"load report: {line}" for line in report)
-        groups.append((model, labels, buses, _np(p), _np(x), _np(z), np.asarray(s0)))
+        groups.append(LoadModelUnits(model, labels, buses, _np(p), _np(x), _np(z),
+                                     np.asarray(s0)))
     drawn = np.zeros(case.n_bus)
-    for _, _, buses, _, _, _, s0 in groups:
-        np.add.at(drawn, buses, s0.real)
+    for g in groups:
+        np.add.at(drawn, g.buses, g.s0.real)
     for b in np.flatnonzero(drawn > bus_p + 1e-9):
         notes.append(f"load report: bus {case.buses.number[b]}: load models draw "
                      f"{drawn[b] * case.base_mva:.2f} MW of a {bus_p[b] * case.base_mva:.2f} MW "
