@@ -24,7 +24,8 @@ Switches where the reference simulators disagree (`MotorOptions`, each [choice] 
     power at V0) or "1pu" (offsets referred to V = 1, as transcribed from the WECC text).
   restall_b: False (default; the references: one stall timer, parts A and B stall
     together and a restarted B never stalls again) or True (per-part timers).
-Other choices: CompPF = 0 is rejected (a power factor is needed); Vx is floored at
+Other choices: timers fire at ≥ T − 0.01·dt, not § 6.7's T − 1e-9 s, which float32
+round-off of the summed steps defeats (`base.timer_fires`); CompPF = 0 is rejected (a power factor is needed); Vx is floored at
 `VX_FLOOR` p.u. so a running motor's current stays bounded; the current is computed as
 an equivalent admittance conj(S)/|V|², which is exact and safe at V → 0.
 """
@@ -35,13 +36,12 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, Params, States)
+from jaxgrid.models.base import Array, Con, LoadModel, LoadSite, Params, States, timer_fires
 
 VX_FLOOR = 0.3  # p.u.: lowest stall-jump voltage (spec §7 guard)
 VX_SCAN_FROM = 0.4  # p.u.: where the Vx search starts (spec §4)
 V_ANGLE_MIN = 0.1  # p.u.: below it the bus frequency measurement holds
 NO_DIP = 10.0  # p.u.: contactor memory "no dip seen" (a finite +inf)
-TIMER_TOL = 1e-9  # s: a timer fires at >= T − TIMER_TOL (spec §6.7)
 SHARE_MODES = ("psse_load_record", "interpss_bus_total", "fraction:x")
 VX_RULES = ("reference_running1", "spec_running2")
 
@@ -236,7 +236,7 @@ class Acmtblu1(LoadModel):
         vc_min, kcon = _contactor(p, z["vc_min"], vm)
         tu1 = jnp.where((p["fuvr"] > 0) & (vm < p["uvtr1"]), z["tu1"] + dt, 0.0)
         tu2 = jnp.where((p["fuvr"] > 0) & (vm < p["uvtr2"]), z["tu2"] + dt, 0.0)
-        uv_trip = (tu1 >= p["ttr1"] - TIMER_TOL) | (tu2 >= p["ttr2"] - TIMER_TOL)
+        uv_trip = timer_fires(tu1, p["ttr1"], dt) | timer_fires(tu2, p["ttr2"], dt)
         kuv = jnp.where(uv_trip & (p["fuvr"] > 0), jnp.minimum(z["kuv"], 1.0 - p["fuvr"]),
                         z["kuv"])
         span = jnp.where(p["thermal_on"] > 0, p["th2t"] - p["th1t"], 1.0)
@@ -284,18 +284,17 @@ def _lag_step(x, u, t, dt: float):
 def _stall_and_restart(p, z, vmag, dt: float):
     """Run flags and timers after a step (spec §6.2-6.3)."""
     low = vmag < p["vstall_adj"]
-    fires = lambda timer, limit: timer >= limit - TIMER_TOL  # noqa: E731
     ts_a = jnp.where((z["run_a"] > 0) & low, z["ts_a"] + dt, 0.0)
-    stall_a = (z["run_a"] > 0) & fires(ts_a, p["tstall"])
+    stall_a = (z["run_a"] > 0) & timer_fires(ts_a, p["tstall"], dt)
     ts_b = jnp.where((z["run_b"] > 0) & low, z["ts_b"] + dt, 0.0)
-    stall_b = jnp.where(p["restall"] > 0, (z["run_b"] > 0) & fires(ts_b, p["tstall"]),
+    stall_b = jnp.where(p["restall"] > 0, (z["run_b"] > 0) & timer_fires(ts_b, p["tstall"], dt),
                         stall_a & (z["run_b"] > 0))
     run_a = jnp.where(stall_a, 0.0, z["run_a"])
     run_b = jnp.where(stall_b, 0.0, z["run_b"])
     ts_a, ts_b = jnp.where(stall_a, 0.0, ts_a), jnp.where(stall_b, 0.0, ts_b)
     may_restart = (p["frst"] > 0) & (run_b < 0.5) & (vmag > p["vrst"])
     tr_b = jnp.where(may_restart, z["tr_b"] + dt, 0.0)
-    restart = may_restart & fires(tr_b, p["trst"])
+    restart = may_restart & timer_fires(tr_b, p["trst"], dt)
     return run_a, jnp.where(restart, 1.0, run_b), ts_a, ts_b, jnp.where(restart, 0.0, tr_b)
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from jaxgrid.io.dyr import DyrRecord
 
 INF = math.inf
+TIMER_TOL_STEPS = 0.01  # of a step: see timer_fires
 
 Array = jnp.ndarray
 Params = dict[str, Array]
@@ -139,6 +140,16 @@ def lead_lag_output(x: Array, u: Array, t_lead: Array, t_lag: Array) -> Array:
     """Output of (1 + s t_lead)/(1 + s t_lag) whose lag state is x; u itself if t_lag == 0."""
     ratio = t_lead / safe(t_lag)
     return jnp.where(t_lag > 0, ratio * u + (1.0 - ratio) * x, u)
+
+
+def timer_fires(elapsed: Array, setting: Array, dt: float) -> Array:
+    """Whether a timer that accumulates dt (s) per step has reached its setting (s).
+
+    It fires at elapsed >= setting − TIMER_TOL_STEPS·dt: the specs' "≥ T − 1e-9 s" (e.g.
+    ACMTBLU1 §6.7) read with a tolerance that outlasts float32 round-off of the summed
+    steps, so a float32 run fires on the same step as a float64 one.
+    """
+    return elapsed >= setting - TIMER_TOL_STEPS * dt
 
 
 def quadratic_saturation(x: Array, a: Array, b: Array, xp=jnp) -> Array:

@@ -29,8 +29,8 @@ load report):
     value is reported. TNOM only serves motor starting and is ignored.
   * The load torque uses max(ω, `W_TORQUE_MIN`) in ω^D and ω^E, so a stalled motor
     (ω = 0, spec §4 speed floor) has finite torque and gradients for any exponent.
-  * Timers fire within `TIMER_TOL_STEPS` of a step of their setting (float32 round-off of
-    the accumulated time).
+  * Timers fire within a hundredth of a step of their setting (float32 round-off of
+    the accumulated time; `base.timer_fires`).
 CIMWBL is not supported: its CON list is unverified (spec §1.3).
 
 Step size: the slip rotation −j·ωb·s·E' makes a stalled motor (s → 1, |ωb·s| ≈ 377 1/s)
@@ -48,7 +48,8 @@ from jaxgrid.io.dyr import DyrRecord
 from jaxgrid.models.acmotor import MotorOptions
 from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, ModelError, Params, States,
                                  device_label, quadratic_saturation,
-                                 quadratic_saturation_constants, safe, saturation_problem)
+                                 quadratic_saturation_constants, safe, saturation_problem,
+                                 timer_fires)
 
 SLIP_MIN = 1e-7             # smallest slip of the initialisation bracket (spec §5)
 SLIP_GRID = 700             # log-spaced slips in [SLIP_MIN, 1] scanned for breakdown
@@ -56,7 +57,6 @@ BISECTIONS = 100            # halvings of the slip bracket (below float64 resolu
 GOLDEN_STEPS = 60           # golden-section steps refining the breakdown slip
 SAT_BISECTIONS = 64         # halvings of the Se(|E''|) bracket in the steady state
 W_TORQUE_MIN = 1e-3         # p.u.: speed floor inside ω^D and ω^E of the load torque
-TIMER_TOL_STEPS = 0.01      # a timer fires at >= T − 0.01·dt
 C0_REPORT_TOL = 1e-6        # |file C0 − computed C0| above which the report mentions it
 
 
@@ -258,13 +258,12 @@ class Cim5bl(LoadModel):
     @classmethod
     def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:
         """Under-voltage trip after an accepted step of dt s at bus voltage v (spec §7)."""
-        tol = TIMER_TOL_STEPS * dt
         armed = (p["vi"] > 0) & (z["picked"] < 0.5) & (z["status"] > 0.5)
         t_low = jnp.where(armed & (jnp.abs(v) < p["vi"]), z["t_low"] + dt, 0.0 * z["t_low"])
-        pickup = armed & (jnp.abs(v) < p["vi"]) & (t_low >= p["ti_s"] - tol)
+        pickup = armed & (jnp.abs(v) < p["vi"]) & timer_fires(t_low, p["ti_s"], dt)
         t_brk = jnp.where(z["picked"] > 0.5, z["t_brk"] + dt, 0.0 * z["t_brk"])
         picked = jnp.where(pickup, 1.0, z["picked"])
-        trip = (picked > 0.5) & (t_brk >= p["tb_s"] - tol)
+        trip = (picked > 0.5) & timer_fires(t_brk, p["tb_s"], dt)
         return {"t_low": t_low, "picked": picked, "t_brk": t_brk,
                 "status": jnp.where(trip, 0.0, z["status"])}
 
