@@ -182,8 +182,7 @@ class Acmtblu1(LoadModel):
         _fix_contactor(p, notes, site)
         p["y_norton"] = sm * (gs - 1j * bs)
         s_motor = _power(p, v0, 1.0, 0.0, np)  # motor base, all running, fm = 1
-        current = np.abs(s_motor) / v0
-        theta0 = current ** 2 * p["rstall"]
+        theta0 = _heat(p, v0, 1.0, 0.0, np)  # the winding temperature at rest
         n = v0.shape[0]
         z = dict(vm=v0, fm=np.ones(n), theta_a=theta0, theta_b=theta0, run_a=np.ones(n),
                  run_b=np.ones(n), ts_a=np.zeros(n), ts_b=np.zeros(n), tr_b=np.zeros(n),
@@ -270,10 +269,10 @@ def _power(p, vmag, running, dfm, xp):
     return xp.where(stalled, (p["gs"] + 1j * p["bs"]) * vmag ** 2, p_run + 1j * q_run)
 
 
-def _heat(p, vmag, running, dfm):
+def _heat(p, vmag, running, dfm, xp=jnp):
     """I²·Rstall of one motor of a part (spec §6.1), motor p.u."""
-    s = _power(p, vmag, running, dfm, jnp)
-    return (jnp.abs(s) / jnp.maximum(vmag, 1e-6)) ** 2 * p["rstall"]
+    s = _power(p, vmag, running, dfm, xp)
+    return (xp.abs(s) / xp.maximum(vmag, 1e-6)) ** 2 * p["rstall"]
 
 
 def _lag_step(x, u, t, dt: float):
