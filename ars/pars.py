@@ -3,14 +3,17 @@
 One jit-compiled function does a whole iteration:
   1. sample N directions δ ~ N(0, I) over the flat policy vector θ;
   2. build the 2N vectors θ ± ν·δ and pick m tasks (the same for every direction and sign,
-     so r+ − r− measures the perturbation alone);
-  3. roll out all 2N·m (θ, task) pairs in one vmapped batch whose axis is sharded over a
-     1-D device mesh (`jax.sharding`), observations normalised by the frozen running stats;
+     so r+ − r− measures the perturbation alone), uniformly or by a given sampler;
+  3. roll out all 2N·m (θ, task) pairs as a vmap over the 2N vectors (sharded over a 1-D
+     device mesh, `jax.sharding`) of a vmap over the m tasks, so the m rollouts of one vector
+     share it; observations normalised by the frozen running stats;
   4. average the returns per ± direction, keep the top b directions by max(r+, r−);
   5. θ += α / (b·σ_b) Σ_top (r+ − r−)·δ, σ_b the std of the 2b selected returns (1 if 0);
   6. α ← ε·α, ν ← ε·ν; merge the observation statistics of every rollout.
 A non-finite return is replaced by the lowest finite return of the iteration, so it can
-never rank first. Nothing here knows about grids.
+never rank first. The tasks and whatever else the episode needs (`data`, e.g. the grid
+models) are arguments of the compiled iteration, not constants: new tasks or data of the
+same shapes reuse the compilation. Nothing here knows about grids.
 """
 from __future__ import annotations
 
@@ -126,60 +129,66 @@ def clean_returns(returns):
     return jnp.where(finite, returns, floor)
 
 
-def make_iteration(episode, policy: Policy, config: ParsConfig, tasks, mesh: Mesh | None = None):
-    """`iteration(state) -> (state, metrics)`, compiled once (`iteration.compiled`).
+def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
+                   mesh: Mesh | None = None):
+    """`iteration(state, tasks, data) -> (state, metrics)`, jit-compiled (`iteration.compiled`).
 
-    episode(policy_apply, policy_params, task, policy_carry) -> dict with "reward" () and
-    "policy_carry" (the final carry); tasks: pytree with a leading axis of n_tasks. The
-    2N·m rollouts are sharded over `mesh` (1-D, axis "batch"; default all devices).
+    episode(policy_apply, policy_params, task, policy_carry, data) -> dict with "reward" ()
+    and "policy_carry" (the final carry); tasks: pytree with a leading axis of n_tasks;
+    data: any pytree the episode reads (passed through unchanged). sample(key) -> (m,) int
+    task indices (default: m distinct tasks uniformly). The 2N perturbed vectors are sharded
+    over `mesh` (1-D, axis "batch"; default all devices).
     """
-    tasks = jax.tree.map(jnp.asarray, tasks)
-    n_tasks = int(jax.tree.leaves(tasks)[0].shape[0])
     m = config.tasks_per_iteration
-    if m > n_tasks:
-        raise ValueError(f"tasks_per_iteration = {m}: only {n_tasks} tasks available")
     mesh = mesh or Mesh(np.array(jax.devices()), ("batch",))
-    batch = 2 * config.directions * m
-    if batch % mesh.size:
-        raise ValueError(f"2·directions·tasks_per_iteration = {batch} rollouts do not split "
-                         f"over {mesh.size} devices")
+    n_dir = config.directions
+    if (2 * n_dir) % mesh.size:
+        raise ValueError(f"2·directions = {2 * n_dir} perturbed policies do not split over "
+                         f"{mesh.size} devices")
     spread = NamedSharding(mesh, PartitionSpec("batch"))
     apply = normalized_policy(policy)
     carry0 = initial_carry(policy)
-    n_dir = config.directions
 
-    def iteration(state: TrainState):
+    def iteration(state: TrainState, tasks, data):
+        n_tasks = int(jax.tree.leaves(tasks)[0].shape[0])
         key, k_dir, k_task = jax.random.split(state.key, 3)
         delta = jax.random.normal(k_dir, (n_dir, policy.size))
-        thetas = jnp.concatenate([state.theta + state.noise * delta,
-                                  state.theta - state.noise * delta])
-        chosen = jax.random.choice(k_task, n_tasks, (m,), replace=False)
-        theta_b = jax.lax.with_sharding_constraint(jnp.repeat(thetas, m, axis=0), spread)
-        task_b = jax.tree.map(
-            lambda a: jax.lax.with_sharding_constraint(
-                jnp.tile(a[chosen], (2 * n_dir,) + (1,) * (a.ndim - 1)), spread), tasks)
+        thetas = jax.lax.with_sharding_constraint(
+            jnp.concatenate([state.theta + state.noise * delta,
+                             state.theta - state.noise * delta]), spread)
+        chosen = (sample(k_task) if sample is not None
+                  else jax.random.choice(k_task, n_tasks, (m,), replace=False))
+        picked = jax.tree.map(lambda a: a[chosen], tasks)
         mean, std = state.stats.mean, state.stats.std
-        out = jax.vmap(lambda th, task: episode(apply, (th, mean, std), task, carry0))(
-            theta_b, task_b)
-        returns = clean_returns(out["reward"].reshape(2 * n_dir, m).mean(axis=1))
+
+        def per_vector(theta):
+            return jax.vmap(lambda task: episode(apply, (theta, mean, std), task, carry0, data))(
+                picked)
+
+        out = jax.vmap(per_vector)(thetas)  # every leaf (2N, m, ...)
+        returns = clean_returns(out["reward"].mean(axis=1))
         r_plus, r_minus = returns[:n_dir], returns[n_dir:]
         theta, _ = ars_update(state.theta, delta, r_plus, r_minus, config.top, state.step_size)
         _, (count, total, total_sq) = out["policy_carry"]
-        stats = normalizer.merge(state.stats, count.sum(), total.sum(0), total_sq.sum(0))
+        stats = normalizer.merge(state.stats, count.sum(), total.sum((0, 1)),
+                                 total_sq.sum((0, 1)))
         new = TrainState(theta=theta, stats=stats, key=key, iteration=state.iteration + 1,
                          step_size=state.step_size * config.decay,
                          noise=state.noise * config.decay)
         metrics = {"reward_mean": returns.mean(), "reward_max": returns.max(),
-                   "rollouts": jnp.asarray(batch)}
+                   "rollouts": jnp.asarray(2 * n_dir * m)}
         return new, metrics
 
     replicated = NamedSharding(mesh, PartitionSpec())
     compiled = jax.jit(iteration, in_shardings=replicated, out_shardings=replicated)
 
-    def run(state: TrainState):
-        # a fresh state lives on one device: place it as the compiled function returns it,
-        # so the first and later calls share one compilation
-        return compiled(jax.device_put(state, replicated))
+    def run(state: TrainState, tasks, data=None):
+        n_tasks = int(jax.tree.leaves(tasks)[0].shape[0])
+        if sample is None and m > n_tasks:
+            raise ValueError(f"tasks_per_iteration = {m}: only {n_tasks} tasks available")
+        # fresh inputs live on one device or the host: place them as the compiled function
+        # returns the state, so the first and later calls share one compilation
+        return compiled(*jax.device_put((state, tasks, data), replicated))
 
     run.compiled = compiled
     return run

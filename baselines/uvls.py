@@ -199,9 +199,12 @@ def uvls_policy(env: LoadSheddingEnv, params: UvlsParams | None = None):
     n_action, n_observed = len(env.config.action_buses), len(env.config.observed_buses)
     newest = (env.config.history - 1) * env.obs_size  # start of the newest observation
     v_at = np.array([newest + i for i in index])
+    if not env.config.include_action_status:
+        raise ValueError("UVLS reads the connected load fraction from the observation: the "
+                         "study must have include_action_status = true")
     left_at = np.arange(n_action) + newest + n_observed
     agent_dt = float(env.config.agent_dt)
-    real = np.dtype(jnp.real(env.model.network.z_ss).dtype)
+    real = np.dtype(np.float64 if env.precision == "float64" else np.float32)
     checked = check_params(UvlsParams() if params is None else params)
     policy_params = jax.tree.map(lambda a: np.asarray(a, real), checked)
     n_stage = checked.levels.size

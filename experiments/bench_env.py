@@ -23,22 +23,23 @@ import jax  # noqa: E402
 
 from experiments.bench_sim import sharded_timings  # noqa: E402
 from experiments.evaluate import no_control  # noqa: E402
-from jaxgrid import cases  # noqa: E402
-from jaxgrid.env import LoadSheddingEnv, study_params  # noqa: E402
-from jaxgrid.tasks import study_task_set, task_batch  # noqa: E402
+from jaxgrid.study import load_study  # noqa: E402
 
 
 def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
-    study = cases.load(name)
-    env = LoadSheddingEnv.for_study(study)
-    specs = study_task_set(name, "train")
+    """Rollouts of the study's training tasks at its first operating point (name: a built-in
+    study or a study file)."""
+    study = load_study(name)
+    env, grid = study.env(), study.point(0)
+    specs = [s for s in study.tasks("train") if s.operating_point == 0]
     apply, params, carry = no_control(env)
     run = jax.jit(env.rollout, static_argnums=0)
-    result = {"case": name, "dt_s": study.dt, "agent_steps": env.config.n_steps, "runs": []}
+    result = {"case": name, "dt_s": env.config.dt, "agent_steps": env.config.n_steps,
+              "runs": []}
     for n_dev, batch, _, first, warm in sharded_timings(
             batch_sizes, device_counts, repeats,
-            lambda batch: task_batch(env.model, [specs[k % len(specs)] for k in range(batch)]),
-            lambda tasks: run(apply, params, tasks, study_params(name), carry)):
+            lambda batch: study.batch([specs[k % len(specs)] for k in range(batch)]).task,
+            lambda tasks: run(apply, params, tasks, study.params, grid, carry)):
         row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
                "warm_s": round(warm, 4),
                "agent_steps_per_s": round(batch * env.config.n_steps / warm, 1),

@@ -36,10 +36,11 @@ import numpy as np  # noqa: E402
 from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
 
 from experiments.andes_reference import run_andes, write_psse_dyr  # noqa: E402
-from jaxgrid import cases, network  # noqa: E402
+from jaxgrid import network  # noqa: E402
 from jaxgrid.compile import CompileOptions, compile_model  # noqa: E402
 from jaxgrid.io.dyr import read_dyr  # noqa: E402
 from jaxgrid.io.raw import read_raw  # noqa: E402
+from jaxgrid.study import builtin  # noqa: E402
 from jaxgrid.simulate import (FaultEvent, heun_step, make_task, simulate_batch,  # noqa: E402
                               stack_tasks)
 
@@ -101,8 +102,8 @@ def step_compile_seconds(model, dt: float) -> float:
 def load_case(name: str):
     """(model, dt s, (raw, dyr) files for ANDES or None) of a benchmark case."""
     if name in STUDY_CASES:
-        study = cases.load(name)
-        return study.compile(), study.dt, None
+        study = builtin(name)
+        return study.point(0), study.config.dt, None
     raw_fn, dyr_fn, drop = CASES[name]
     folder = tempfile.mkdtemp()
     dyr = write_psse_dyr(str(dyr_fn()), os.path.join(folder, f"{name}.dyr"), drop)

@@ -31,6 +31,7 @@ from ars.pars import ParsConfig, init_state  # noqa: E402
 from experiments import train_39bus, train_300bus  # noqa: E402
 from experiments.bench_sim import _timed  # noqa: E402
 from experiments.train import build  # noqa: E402
+from jaxgrid.study import builtin  # noqa: E402
 
 DEFAULTS = {"ieee39_fidvr": train_39bus.DEFAULTS, "ieee300_fidvr": train_300bus.DEFAULTS}
 TASKS_PER_ITERATION = 9
@@ -50,14 +51,19 @@ def bench_case(case: str, device_counts, repeats: int) -> dict:
     for n_dev in device_counts:
         mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
         start = time.perf_counter()
-        iteration, policy, _ = build(case, defaults["policy"], hidden, 1, config, EPISODE,
-                                     mesh=mesh)
+        trainer = build(builtin(case), defaults["policy"], hidden, config, 1, EPISODE,
+                        mesh=mesh)
         build_s = time.perf_counter() - start
-        state = init_state(policy, config)
-        (state, _), first = _timed(lambda: iteration(state))
+        state = init_state(trainer.policy, config)
+        data = jax.device_put((trainer.tasks, trainer.data))
+
+        def step():
+            return trainer.iteration(state, *data)
+
+        (state, _), first = _timed(step)
         warm = []
         for _ in range(repeats):
-            (state, metrics), wall = _timed(lambda: iteration(state))
+            (state, metrics), wall = _timed(step)
             warm.append(wall)
         row = {"devices": n_dev, "build_s": round(build_s, 2), "first_call_s": round(first, 2),
                "s_per_iteration": round(min(warm), 2),

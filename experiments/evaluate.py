@@ -1,13 +1,17 @@
-"""Evaluate a load-shedding controller on a study case's task set.
+"""Evaluate a load-shedding controller on a study's task set, at every operating point.
 
-    python -m experiments.evaluate --case ieee39_fidvr --controller none|uvls|policy:PATH \
-        --tasks train|test --out results.json [--plot DIR] [--operating-points 0.9 1.0 1.1]
+    python -m experiments.evaluate --study ieee39_fidvr|FILE.toml --controller none|uvls|policy:PATH \
+        --tasks train|test|NAME|FILE.json --out results.json [--plot DIR]
+    python -m experiments.evaluate --raw R1 R2 --dyr D --task-config J ... (a study from files)
 
-Writes {"case", "controller", "tasks": [{"fault_bus", "fault_duration", "operating_point",
-"reward", "shed_mw", "recovered"}], "summary": {"n_tasks", "n_recovered", "mean_reward",
-"total_shed_mw"}}. With --plot, draws for the lowest-reward tasks (--plot-count) the observed
-bus voltages against the recovery envelope and the total load shed against time.
-Every operating point is its own compiled model; all its tasks run in one vmapped call.
+`--tasks` names a task set of the study, or a PNNL task JSON whose fault candidates, crossed
+with the study's operating points, make the set. Writes {"study", "controller", "points",
+"tasks": [{"fault_bus", "fault_duration", "fault_start", "operating_point" (label), "point"
+(index), "reward", "shed_mw", "recovered"}], "summary": {"n_tasks", "n_recovered",
+"mean_reward", "total_shed_mw"}} and the resolved study beside it (OUT.study.toml). With
+--plot, draws for the lowest-reward tasks (--plot-count) the observed bus voltages against
+the recovery envelope and the total load shed against time. All operating points run in one
+compiled, vmapped call. A saved policy must observe and act on the study's buses.
 """
 from __future__ import annotations
 
@@ -16,14 +20,14 @@ import json
 import sys
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid import cases
-from jaxgrid.env import LoadSheddingEnv, study_params
+from experiments.studyargs import add_study_arguments, study_from_args
+from jaxgrid.env import LoadSheddingEnv
 from jaxgrid.recovery import envelope
-from jaxgrid.tasks import study_task_set, task_batch
+from jaxgrid.study import Study, bus_number, rollout_specs, write_study
+from jaxgrid.tasks import TaskSet
 
 
 def no_control(env: LoadSheddingEnv):
@@ -38,6 +42,17 @@ def saved_policy(control: str):
         return None
     from ars.checkpoint import load_policy
     return load_policy(control.removeprefix("policy:"))
+
+
+def check_layout(control: str, info: dict, study: Study, env: LoadSheddingEnv) -> None:
+    """ValueError naming both layouts if a saved policy observes or acts on other buses."""
+    from experiments.train import layout
+
+    trained = info.get("layout")
+    here = layout(study, env.config)
+    if trained is not None and trained != here:
+        raise ValueError(f"{control} (trained on study {info.get('study')!r}) has the layout "
+                         f"{trained}; study {study.name!r} has {here}")
 
 
 def controller(spec: str, env: LoadSheddingEnv, saved=None):
@@ -58,46 +73,53 @@ def controller(spec: str, env: LoadSheddingEnv, saved=None):
     raise ValueError(f"--controller {spec!r}: allowed none, uvls or policy:PATH")
 
 
-def evaluate(case: str, control: str, tasks: str, operating_points=(1.0,), plot_dir=None,
+def task_specs(study: Study, tasks: str):
+    """The specs of `tasks`: a task set of the study, or a PNNL task JSON's fault candidates
+    at every operating point."""
+    if not tasks.endswith(".json"):
+        return study.tasks(tasks)
+    from jaxgrid.io.pnnl import read_task_config
+
+    config = read_task_config(tasks)
+    case = study.points[0].case
+    buses = tuple(bus_number(n, case, config.source, "faultBusCandidates")
+                  for n in config.fault_buses)
+    return TaskSet(buses, config.fault_durations, config.fault_starts).specs(study.n_points)
+
+
+def evaluate(study: Study, control: str, tasks: str = "test", plot_dir=None,
              plot_count: int = 3) -> dict:
     """The results dict of the module docstring (and figures in plot_dir)."""
-    specs = study_task_set(case, tasks, operating_points)
     saved = saved_policy(control)
-    history = int(saved[2].get("history", 1)) if saved else 1  # as the policy was trained
-    rows, figures = [], []
-    for point in operating_points:
-        study = cases.load(case, load_level=point)
-        env = LoadSheddingEnv.for_study(study, history=history)
-        params = study_params(case)
-        unchecked = env.unchecked_buses(params)
+    history = int(saved[2].get("history", 1)) if saved else None  # as the policy was trained
+    env = study.env(**({"history": history} if history else {}))
+    if saved:
+        check_layout(control, saved[2], study, env)
+    for k, point in enumerate(study.points):
+        unchecked = env.unchecked_buses(study.params, study.point(k))
         if unchecked:
-            print(f"{study.name}: observed buses {list(unchecked)} sit below the recovery level "
-                  "before any fault; the recovery check leaves them out")
-        chosen = [s for s in specs if s.operating_point == point]
-        apply, policy_params, carry = controller(control, env, saved)
-        run = jax.jit(env.rollout, static_argnums=0, static_argnames="trace")
-        out = run(apply, policy_params, task_batch(env.model, chosen), params, carry,
-                  trace=plot_dir is not None)
-        out = jax.tree.map(np.asarray, out)
-        base_mva = study.case.base_mva
-        for k, spec in enumerate(chosen):
-            rows.append({"fault_bus": spec.fault_bus, "fault_duration": spec.fault_duration,
-                         "operating_point": point, "reward": float(out["reward"][k]),
-                         "shed_mw": float(out["shed_pu"][k]) * base_mva,
-                         "recovered": bool(out["recovered"][k])})
-            if plot_dir is not None:
-                figures.append((float(out["reward"][k]), spec, study, env, out, k))
+            print(f"{study.name} {point.label}: observed buses {list(unchecked)} sit below the "
+                  "recovery level before any fault; the recovery check leaves them out")
+    apply, policy_params, carry = controller(control, env, saved)
+    specs, out = rollout_specs(study, env, apply, policy_params, task_specs(study, tasks),
+                               carry, trace=plot_dir is not None)
+    rows = [{"fault_bus": s.fault_bus, "fault_duration": s.fault_duration,
+             "fault_start": s.fault_start, "operating_point": study.points[s.operating_point]
+             .label, "point": s.operating_point, "reward": float(out["reward"][k]),
+             "shed_mw": float(out["shed_pu"][k]) * study.base_mva,
+             "recovered": bool(out["recovered"][k])} for k, s in enumerate(specs)]
     if plot_dir is not None:
-        for _, spec, study, env, out, k in sorted(figures, key=lambda f: f[0])[:plot_count]:
-            _plot(Path(plot_dir), spec, study, env, out, k, control)
+        for k in np.argsort(out["reward"], kind="stable")[:plot_count]:
+            _plot(Path(plot_dir), specs[k], study, env, out, int(k), control)
     rewards = [r["reward"] for r in rows]
-    return {"case": case, "controller": control, "tasks": rows,
+    return {"study": study.name, "controller": control,
+            "points": [p.label for p in study.points], "tasks": rows,
             "summary": {"n_tasks": len(rows), "n_recovered": sum(r["recovered"] for r in rows),
                         "mean_reward": float(np.mean(rewards)),
                         "total_shed_mw": float(sum(r["shed_mw"] for r in rows))}}
 
 
-def _plot(folder: Path, spec, study, env, out, k, control: str) -> None:
+def _plot(folder: Path, spec, study: Study, env, out, k, control: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -106,21 +128,23 @@ def _plot(folder: Path, spec, study, env, out, k, control: str) -> None:
     steps = out["vm"].shape[1]
     t = (np.arange(steps) + 1) * env.config.agent_dt
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    for j, bus in enumerate(study.observed_buses):
+    for j, bus in enumerate(env.config.observed_buses):
         top.plot(t, out["vm"][k, :, j], lw=0.8, label=f"bus {bus}" if j < 8 else None)
     cleared = spec.fault_start + spec.fault_duration if spec.fault_duration > 0 else 0.0
     fine = np.linspace(0, t[-1], 1000)
     top.step(fine, envelope(fine - cleared), "k--", where="post", label="envelope")
     top.set_ylabel("voltage (p.u.)")
-    top.set_title(f"{study.name}, {control}: fault at bus {spec.fault_bus}, "
+    label = study.points[spec.operating_point].label
+    top.set_title(f"{study.name} {label}, {control}: fault at bus {spec.fault_bus}, "
                   f"{spec.fault_duration * 1000:.0f} ms; reward {out['reward'][k]:.1f}")
     top.legend(fontsize=7, ncol=3)
-    bottom.step(t, np.cumsum(out["shed_step_pu"][k]) * study.case.base_mva, where="post")
+    bottom.step(t, np.cumsum(out["shed_step_pu"][k]) * study.base_mva, where="post")
     bottom.set_ylabel("load shed (MW)")
     bottom.set_xlabel("time (s)")
     fig.tight_layout()
-    name = f"{study.name}_{control.replace(':', '_').replace('/', '_')}_bus{spec.fault_bus}_" \
-           f"{int(round(spec.fault_duration * 1000))}ms.png"
+    controller_name = control.replace(":", "_").replace("/", "_")
+    name = (f"{study.name}_{label}_{controller_name}_bus{spec.fault_bus}_"
+            f"{int(round(spec.fault_duration * 1000))}ms.png")
     fig.savefig(folder / name, dpi=110)
     plt.close(fig)
 
@@ -128,22 +152,23 @@ def _plot(folder: Path, spec, study, env, out, k, control: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m experiments.evaluate",
                                 description=__doc__.split("\n")[0])
-    p.add_argument("--case", default="ieee39_fidvr", choices=["ieee39_fidvr", "ieee300_fidvr"])
+    add_study_arguments(p, "ieee39_fidvr")
     p.add_argument("--controller", default="none", help="none | uvls | policy:PATH")
-    p.add_argument("--tasks", default="test", choices=["train", "test"])
-    p.add_argument("--operating-points", nargs="*", type=float, default=[1.0])
+    p.add_argument("--tasks", default="test", help="task set name, or a PNNL task JSON")
     p.add_argument("--out", default="results/evaluate.json")
     p.add_argument("--plot", help="folder for figures of the lowest-reward tasks")
     p.add_argument("--plot-count", type=int, default=3)
     args = p.parse_args(argv)
     try:
-        result = evaluate(args.case, args.controller, args.tasks, tuple(args.operating_points),
-                          args.plot, args.plot_count)
+        study = study_from_args(args)
+        result = evaluate(study, args.controller, args.tasks, args.plot, args.plot_count)
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1))
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=1))
+    write_study(study, out.with_suffix(".study.toml"))
     s = result["summary"]
     print(f"{args.out}: {s['n_recovered']}/{s['n_tasks']} recovered, mean reward "
           f"{s['mean_reward']:.1f}, total shed {s['total_shed_mw']:.0f} MW")

@@ -1,7 +1,10 @@
-"""Draw fault-induced delayed voltage recovery on a built-in study case.
+"""Draw fault-induced delayed voltage recovery on a study (built-in, file or RAW + DYR).
 
-    python -m experiments.plot_fidvr --case ieee39_fidvr --fault-bus 4 --fault-duration 0.08 \
-        --out fidvr.png
+    python -m experiments.plot_fidvr --study ieee39_fidvr --fault-bus 4 --fault-duration 0.08 \
+        [--point 0] --out fidvr.png
+
+The motor-data readings (`MotorOptions`) are the study's compile settings ([compile.motors]
+of a study file).
 
 Top: the observed bus voltages against the recovery envelope (0.7 / 0.8 / 0.9 / 0.95 p.u.
 from 0 / 0.33 / 0.5 / 1.5 s after clearing). Bottom: the A/C motor population, weighted by
@@ -14,9 +17,8 @@ import sys
 
 import numpy as np
 
-from jaxgrid import cases
-from jaxgrid.compile import CompileOptions
-from jaxgrid.models.acmotor import Acmtblu1, MotorOptions, motor_status
+from experiments.studyargs import add_study_arguments, study_from_args
+from jaxgrid.models.acmotor import Acmtblu1, motor_status
 from jaxgrid.recovery import envelope
 from jaxgrid.simulate import FaultEvent, simulate
 
@@ -24,16 +26,12 @@ from jaxgrid.simulate import FaultEvent, simulate
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m experiments.plot_fidvr",
                                 description=__doc__.split("\n")[0])
-    p.add_argument("--case", default="ieee39_fidvr", help="built-in study case")
-    p.add_argument("--load-level", type=float, default=1.0, help="operating point (load factor)")
+    add_study_arguments(p, "ieee39_fidvr")
+    p.add_argument("--point", type=int, default=0, help="operating point index (default 0)")
     p.add_argument("--fault-bus", type=int, required=True, help="RAW number of the faulted bus")
     p.add_argument("--fault-start", type=float, default=1.0, help="s (default 1.0)")
     p.add_argument("--fault-duration", type=float, default=0.08, help="s (default 0.08)")
     p.add_argument("--t-end", type=float, default=10.0, help="s (default 10)")
-    p.add_argument("--motor-share", default="psse_load_record",
-                   help="psse_load_record | interpss_bus_total | fraction:X")
-    p.add_argument("--vx-rule", default="reference_running1",
-                   choices=["reference_running1", "spec_running2"])
     p.add_argument("--out", default="fidvr.png", help="PNG file")
     return p
 
@@ -64,7 +62,7 @@ def draw(study, model, t: np.ndarray, vm: np.ndarray, shares: np.ndarray, fault:
     cleared = fault.start + fault.duration
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 7), sharex=True,
                                       gridspec_kw={"height_ratios": [2, 1]})
-    for bus in study.observed_buses:
+    for bus in study.config.observed_buses:
         top.plot(t, vm[:, model.bus_index(bus)], lw=1, label=f"bus {bus}")
     fine = np.linspace(0, t[-1], 2000)
     top.step(fine, envelope(fine - cleared), "k--", where="post", lw=1.5,
@@ -89,13 +87,15 @@ def draw(study, model, t: np.ndarray, vm: np.ndarray, shares: np.ndarray, fault:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
-        study = cases.load(args.case, load_level=args.load_level)
-        options = CompileOptions(load_buses=study.action_buses, motors=MotorOptions(
-            share_mode=args.motor_share, vx_rule=args.vx_rule))
-        model = study.compile(options)
+        study = study_from_args(args)
+        if not 0 <= args.point < study.n_points:
+            raise ValueError(f"--point {args.point}: the study has {study.n_points} operating "
+                             f"points (0 to {study.n_points - 1})")
+        model = study.point(args.point)
         fault = FaultEvent(args.fault_bus, args.fault_start, args.fault_duration)
-        decimation = max(1, int(round(0.01 / study.dt)))
-        traj = simulate(model, args.t_end, study.dt, fault=fault, decimation=decimation)
+        dt = study.config.dt
+        traj = simulate(model, args.t_end, dt, fault=fault,
+                        decimation=max(1, int(round(0.01 / dt))))
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     judged = fault.start + fault.duration + 4.0
     k = min(int(np.searchsorted(t, judged - 1e-6)), len(t) - 1)
     when = "4 s after clearing" if t[k] >= judged - 1e-6 else f"at the end ({t[k]:.2f} s)"
-    observed = vm[k, [model.bus_index(b) for b in study.observed_buses]]
+    observed = vm[k, [model.bus_index(b) for b in study.config.observed_buses]]
     running, stalled, off = shares
     print(f"{args.out}: lowest observed voltage {when} {observed.min():.3f} p.u.; "
           f"motors at the end: {running[-1]:.0%} running, {stalled[-1]:.0%} stalled, "

@@ -1,7 +1,14 @@
-"""PARS training of a load-shedding policy on a built-in FIDVR study case.
+"""PARS training of a load-shedding policy on a study (built-in, study file, or RAW + DYR +
+task files).
 
-`experiments.train_39bus` and `experiments.train_300bus` call `main` with the study's
-defaults; every hyper-parameter has a flag. Output folder DIR:
+    python -m experiments.train --study ieee39_fidvr|studies/x.toml --out DIR
+    python -m experiments.train --raw R1 R2 ... --dyr D --task-config J [--sim-config S] --out DIR
+
+`experiments.train_39bus` and `experiments.train_300bus` are presets (the built-in studies
+with the paper's hyper-parameters); every hyper-parameter has a flag. Each iteration draws
+m tasks of the study's training set across its operating points, uniformly or stratified
+(`--task-sampling`); all operating points share one compiled iteration. Output folder DIR:
+  study.toml      the resolved study (`--resume` without --study reads it back)
   metrics.jsonl   one line per iteration: iteration, reward_mean, reward_max, wall_s, rollouts
   checkpoints/    orbax checkpoints every --checkpoint-every iterations and at the end
   policy/         the trained policy (experiments.evaluate --controller policy:DIR/policy)
@@ -21,30 +28,42 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import numpy as np
 
+from experiments.studyargs import add_study_arguments, study_from_args
 
-def parser(case: str, defaults: dict) -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog=f"python -m experiments.train_{case.split('_')[0][4:]}bus",
-                                description=f"PARS training on {case}")
+# Hyper-parameter defaults of the plain command (the presets give the paper's per case).
+DEFAULTS = {"study": None, "policy": "lstm", "hidden": "32,32", "directions": 16, "top": 8,
+            "decay": 0.99, "iterations": 200}
+
+
+def parser(defaults: dict) -> argparse.ArgumentParser:
+    study = defaults["study"]
+    p = argparse.ArgumentParser(prog="python -m experiments.train",
+                                description=f"PARS training on {study or 'a study'}")
+    add_study_arguments(p, study)
     p.add_argument("--policy", default=defaults["policy"], choices=["linear", "fnn", "lstm"])
     p.add_argument("--hidden", default=defaults["hidden"], help="layer widths, e.g. 32,32")
-    p.add_argument("--history", type=int, help="observations stacked (default: 1 for lstm, "
-                                               "10 for linear and fnn, as the study)")
+    p.add_argument("--history", type=int,
+                   help="observations stacked (default: the study's; its PNNL task file "
+                        "gives 10 for the 39-bus and 1 or 4 for the 300-bus policies)")
     p.add_argument("--directions", type=int, default=defaults["directions"], help="N")
     p.add_argument("--top", type=int, default=defaults["top"], help="b")
     p.add_argument("--step-size", type=float, default=1.0, help="α")
     p.add_argument("--noise", type=float, default=2.0, help="ν")
     p.add_argument("--decay", type=float, default=defaults["decay"], help="ε")
     p.add_argument("--tasks-per-iteration", type=int, default=9, help="m")
+    p.add_argument("--task-set", default="train", help="the study's task set to train on")
+    p.add_argument("--task-sampling", default="uniform", choices=["uniform", "stratified"],
+                   help="m distinct tasks uniformly, or k buses × k' durations as the paper")
     p.add_argument("--iterations", type=int, default=defaults["iterations"],
                    help="total iterations of the run (with --resume: continue up to it)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--episode", type=float, default=10.0, help="episode length, s")
-    p.add_argument("--load-level", type=float, default=1.0, help="operating point")
-    p.add_argument("--out", default=f"runs/{case}", help="output folder")
+    p.add_argument("--episode", type=float, help="episode length, s (default: the study's)")
+    p.add_argument("--out", default=f"runs/{study or 'study'}", help="output folder")
     p.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
     p.add_argument("--checkpoint-every", type=int, default=10, help="K iterations")
     p.add_argument("--distributed", action="store_true",
@@ -56,58 +75,75 @@ def parser(case: str, defaults: dict) -> argparse.ArgumentParser:
     return p
 
 
-def main(case: str, defaults: dict, argv: list[str] | None = None) -> int:
-    args = parser(case, defaults).parse_args(argv)
+def main(argv: list[str] | None = None, defaults: dict = DEFAULTS) -> int:
+    args = parser(defaults).parse_args(argv)
     if args.distributed or args.coordinator or args.num_processes:
         jax.distributed.initialize(args.coordinator, args.num_processes, args.process_id)
     try:
-        return _train(case, args)
-    except ValueError as err:
+        return _train(args)
+    except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
 
 
-def build(case: str, policy_kind: str, hidden: tuple[int, ...], history: int,
-          config, episode: float = 10.0, load_level: float = 1.0, mesh=None):
-    """(iteration, Policy, PolicySpec) for PARS on a built-in study case.
+class Trainer(NamedTuple):
+    """What `build` makes: iteration(state, tasks, data), the policy and its spec, and the
+    arguments the iteration takes (tasks: PointTask batch, data: the stacked grid models)."""
 
-    `iteration(state) -> (state, metrics)` is `ars.pars.make_iteration` over the case's
-    training tasks, episodes of `episode` s, rollouts sharded over `mesh` (default: all
-    devices).
-    """
+    iteration: object
+    policy: object
+    spec: object
+    tasks: object
+    data: object
+
+
+def build(study, policy_kind: str, hidden: tuple[int, ...], config, history: int | None = None,
+          episode: float | None = None, task_set: str = "train", sampling: str = "uniform",
+          mesh=None) -> Trainer:
+    """PARS on `study`'s task set `task_set`, episodes of `episode` s (default the study's),
+    `history` observations stacked (default the study's), rollouts sharded over `mesh`
+    (default: all devices)."""
     from ars.pars import make_iteration
     from ars.policies import Policy, PolicySpec
-    from jaxgrid import cases
-    from jaxgrid.env import LoadSheddingEnv, study_params
-    from jaxgrid.tasks import study_task_set, task_batch
+    from jaxgrid.study import point_episode, stratified_sampler
 
-    env = LoadSheddingEnv.for_study(cases.load(case, load_level=load_level), history=history,
-                                    episode=episode)
-    params = study_params(case)
-    spec = PolicySpec(policy_kind, history * env.obs_size, len(env.action_slots), hidden,
-                      float(params.action_low), float(params.action_high))
+    overrides = {k: v for k, v in (("history", history), ("episode", episode)) if v is not None}
+    env = study.env(**overrides)
+    params = study.params
+    spec = PolicySpec(policy_kind, env.config.history * env.obs_size, len(env.action_slots),
+                      hidden, float(params.action_low), float(params.action_high))
     policy = Policy(spec)
-    tasks = task_batch(env.model, study_task_set(case, "train"))
-    iteration = make_iteration(
-        lambda apply, pp, task, carry: env.episode(apply, pp, task, params, carry),
-        policy, config, tasks, mesh)
-    return iteration, policy, spec
+    sample = (stratified_sampler(study.task_set(task_set), study.n_points,
+                                 config.tasks_per_iteration)
+              if sampling == "stratified" else None)
+    iteration = make_iteration(point_episode(env, params), policy, config, sample, mesh)
+    return Trainer(iteration, policy, spec, study.batch(study.tasks(task_set)), study.models)
 
 
-def _train(case: str, args) -> int:
+def layout(study, env_config) -> dict:
+    """What a saved policy observes and acts on (checked when it is evaluated)."""
+    return {"observed_buses": list(env_config.observed_buses),
+            "action_buses": list(env_config.action_buses), "history": env_config.history,
+            "include_action_status": env_config.include_action_status}
+
+
+def _train(args) -> int:
     from tqdm import tqdm
 
     from ars import checkpoint
     from ars.pars import ParsConfig, init_state
+    from jaxgrid.study import write_study
 
     hidden = tuple(int(h) for h in str(args.hidden).split(",") if h.strip())
-    history = args.history or (1 if args.policy == "lstm" else 10)
     config = ParsConfig(directions=args.directions, top=args.top, step_size=args.step_size,
                         noise=args.noise, decay=args.decay,
                         tasks_per_iteration=args.tasks_per_iteration, seed=args.seed)
     if args.iterations < 1 or args.checkpoint_every < 1:
         raise ValueError("--iterations and --checkpoint-every must be >= 1")
     out = Path(args.out)
+    saved_study = out / "study.toml"
+    study = study_from_args(args, str(saved_study) if args.resume and saved_study.is_file()
+                            else None)
     out.mkdir(parents=True, exist_ok=True)
     mgr = checkpoint.manager(out / "checkpoints", args.checkpoint_every)
     if not args.resume and mgr.latest_step() is not None:
@@ -116,11 +152,16 @@ def _train(case: str, args) -> int:
     if args.resume and (mgr.latest_step() or 0) > args.iterations:
         raise ValueError(f"--resume: the checkpoint in {out} is at iteration "
                          f"{mgr.latest_step()}, past --iterations {args.iterations}")
-    iteration, policy, spec = build(case, args.policy, hidden, history, config, args.episode,
-                                    args.load_level)
-    run_info = {"case": case, "load_level": args.load_level, "history": history,
-                "episode": args.episode, "config": dataclasses.asdict(config)}
-    state, log = init_state(policy, config), []
+    trainer = build(study, args.policy, hidden, config, args.history, args.episode,
+                    args.task_set, args.task_sampling)
+    env_config = study.env(**{k: v for k, v in (("history", args.history),
+                                                 ("episode", args.episode))
+                              if v is not None}).config
+    run_info = {"study": study.name, "points": [p.label for p in study.points],
+                "task_set": args.task_set, "task_sampling": args.task_sampling,
+                "layout": layout(study, env_config), "history": env_config.history,
+                "episode": env_config.episode, "config": dataclasses.asdict(config)}
+    state, log = init_state(trainer.policy, config), []
     if args.resume:
         restored = checkpoint.restore_latest(mgr, state)
         if restored is None:
@@ -132,13 +173,14 @@ def _train(case: str, args) -> int:
     primary = jax.process_index() == 0
     metrics_path = out / "metrics.jsonl"
     if primary:
+        write_study(study, saved_study)
         metrics_path.write_text("".join(json.dumps(m) + "\n" for m in log))
     done = int(state.iteration)
     rollouts = log[-1]["rollouts"] if log else 0
     bar = tqdm(total=args.iterations, initial=done, unit="it", disable=not primary)
     while done < args.iterations:
         start = time.perf_counter()
-        state, metrics = iteration(state)
+        state, metrics = trainer.iteration(state, trainer.tasks, trainer.data)
         metrics = jax.device_get(metrics)
         wall = time.perf_counter() - start
         done, rollouts = done + 1, rollouts + int(metrics["rollouts"])
@@ -155,17 +197,18 @@ def _train(case: str, args) -> int:
         last = done == args.iterations
         checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last)
         if primary and (done % args.checkpoint_every == 0 or last):
-            checkpoint.save_policy(out / "policies" / f"{done:05d}", spec, state, run_info)
+            checkpoint.save_policy(out / "policies" / f"{done:05d}", trainer.spec, state,
+                                   run_info)
     bar.close()
     if primary:
-        checkpoint.save_policy(out / "policy", spec, state, run_info)
-        _learning_curve(log, out / "learning_curve.png", case)
+        checkpoint.save_policy(out / "policy", trainer.spec, state, run_info)
+        _learning_curve(log, out / "learning_curve.png", study.name)
         print(f"{out}: {done} iterations, last mean reward {log[-1]['reward_mean']:.1f}, "
               f"policy in {out / 'policy'}")
     return 0
 
 
-def _learning_curve(log: list[dict], path: Path, case: str) -> None:
+def _learning_curve(log: list[dict], path: Path, study: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -176,9 +219,13 @@ def _learning_curve(log: list[dict], path: Path, case: str) -> None:
     ax.plot(it, [m["reward_max"] for m in log], alpha=0.6, label="best direction")
     ax.set_xlabel("iteration")
     ax.set_ylabel("reward per episode")
-    ax.set_title(f"PARS on {case}")
+    ax.set_title(f"PARS on {study}")
     ax.legend()
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

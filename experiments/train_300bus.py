@@ -2,10 +2,11 @@
 b = 64, α = 1, ν = 2, ε = 0.996). See experiments/train.py for the flags and outputs."""
 import sys
 
+from experiments.train import DEFAULTS as PLAIN
 from experiments.train import main
 
-DEFAULTS = {"policy": "lstm", "hidden": "64,64", "directions": 128, "top": 64,
-            "decay": 0.996, "iterations": 500}
+DEFAULTS = {**PLAIN, "study": "ieee300_fidvr", "policy": "lstm", "hidden": "64,64",
+            "directions": 128, "top": 64, "decay": 0.996, "iterations": 500}
 
 if __name__ == "__main__":
-    sys.exit(main("ieee300_fidvr", DEFAULTS))
+    sys.exit(main(sys.argv[1:], DEFAULTS))

@@ -1,13 +1,15 @@
 """The FIDVR load-shedding environment of the PNNL PARS study, functional and jittable.
 
-    env = LoadSheddingEnv.for_study(study)   # or LoadSheddingEnv(model, EnvConfig(...))
-    obs, state = env.reset(key, task, params)
-    obs, state, reward, done, info = env.step(state, action, params)
+    env = study.env()                         # or LoadSheddingEnv(model, EnvConfig(...))
+    grid = study.point(0)                     # the grid model of one operating point (data)
+    obs, state = env.reset(key, task, params, grid)
+    obs, state, reward, done, info = env.step(state, action, params, grid)
 
 Every agent step (0.1 s) the action sheds, per action bus, a fraction of its initial load
 (in [-0.2, 0], negative sheds, clipped to what remains); the grid then runs for one agent
 step of simulation steps. The observation is the voltage magnitude at the observed buses
-and the remaining load fraction at the action buses, optionally the last k of them stacked.
+and (unless `include_action_status` is off) the remaining load fraction at the action
+buses, optionally the last k of them stacked.
 The reward per step is
 
     c1·Σ_i ΔV_i − c2·Σ_j ΔP_j − c3·n_invalid − c_pre·n_prefault,
@@ -16,7 +18,9 @@ The reward per step is
 load shed this step in p.u. of the system base; an episode that still has a voltage of the
 recovery-check set below the recovery level after the recovery time (or diverges) earns −M
 and ends (`terminated`); reaching the episode length ends it too (`truncated`). Each term
-is a named function below. `EnvConfig` is structure (static), `EnvParams` values (traced).
+is a named function below. `EnvConfig` is structure (static), `EnvParams` values (traced),
+and the grid model (`GridModel`, one operating point) is an argument of every call, never a
+constant of the compiled step: one compilation serves every operating point of a grid.
 """
 from __future__ import annotations
 
@@ -59,17 +63,6 @@ class EnvParams:
     action_high: float = 0.0
 
 
-# The study's values per built-in case where they differ from the EnvParams defaults.
-STUDY_PARAMS = {"ieee39_fidvr": {},
-                "ieee300_fidvr": {"c_voltage": 30.0, "unstable_penalty": 10000.0}}
-
-
-def study_params(case: str) -> EnvParams:
-    """EnvParams of a built-in study case ("ieee300_fidvr" or e.g. "ieee300_fidvr_load90")."""
-    base = case.split("_load")[0]
-    if base not in STUDY_PARAMS:
-        raise ValueError(f"no study parameters for case {case!r}; known: {', '.join(STUDY_PARAMS)}")
-    return EnvParams(**STUDY_PARAMS[base])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,6 +73,9 @@ class EnvConfig:
       observed_buses, action_buses: RAW bus numbers.
       dt: simulation step, s.  agent_dt: control step, s.  episode: length, s.
       history: number of last observations stacked (1: just the current one).
+      include_action_status: the observation ends with the connected load fraction at the
+        action buses (PNNL includeActionStatusInObservations).
+      recovery_buses: the observed buses the recovery check covers (None: all of them).
       bounds: divergence bounds of the simulation.
     """
 
@@ -89,6 +85,8 @@ class EnvConfig:
     agent_dt: float = 0.1
     episode: float = 10.0
     history: int = 1
+    include_action_status: bool = True
+    recovery_buses: tuple[int, ...] | None = None
     bounds: Bounds = Bounds()
 
     def __post_init__(self):
@@ -100,6 +98,9 @@ class EnvConfig:
             raise ValueError(f"history = {self.history!r}: must be an int >= 1")
         if not self.episode >= self.agent_dt:
             raise ValueError(f"episode = {self.episode} s: must be >= agent_dt")
+        outside = sorted(set(self.recovery_buses or ()) - set(self.observed_buses))
+        if outside:
+            raise ValueError(f"recovery_buses {outside} are not observed buses")
 
     @property
     def sim_steps(self) -> int:
@@ -111,11 +112,6 @@ class EnvConfig:
         """Agent steps per episode."""
         return int(round(self.episode / self.agent_dt))
 
-    @classmethod
-    def for_study(cls, study, **overrides) -> EnvConfig:
-        """The configuration of a built-in `StudyCase` (its buses and step)."""
-        return cls(observed_buses=study.observed_buses, action_buses=study.action_buses,
-                   dt=study.dt, **overrides)
 
 
 @struct.dataclass
@@ -179,69 +175,75 @@ def recovery_failed(vm, check, t_after_clearing, params: EnvParams):
 # --------------------------------------------------------------------------- #
 
 class LoadSheddingEnv:
-    """Structure (model, bus indices, step counts); `reset`/`step`/`rollout` are pure."""
+    """Structure (bus indices, step counts); `reset`/`step`/`episode`/`rollout` are pure and
+    take the grid model of the operating point as an argument.
+
+    `model` gives the structure only (bus numbering, load slots, precision): any operating
+    point of the same grid does, and its arrays are not kept.
+    """
 
     def __init__(self, model: GridModel, config: EnvConfig):
-        with jax.enable_x64(model.precision == "float64"):
-            self.model = jax.tree.map(jnp.asarray, model)  # constants of the compiled step
         self.config = config
+        self.precision = model.precision
         self.observed = np.array([model.bus_index(b) for b in config.observed_buses])
         self.action_slots = np.array([model.load_slot(b) for b in config.action_buses])
+        checked = set(config.observed_buses if config.recovery_buses is None
+                      else config.recovery_buses)
+        self.recovery_mask = np.array([b in checked for b in config.observed_buses])
 
-    @classmethod
-    def for_study(cls, study, **config) -> LoadSheddingEnv:
-        """The environment of a built-in `StudyCase` (compiled with its default options);
-        `config` overrides `EnvConfig` fields, e.g. episode=6.0 (s), history=3."""
-        return cls(study.compile(), EnvConfig.for_study(study, **config))
-
-    def unchecked_buses(self, params: EnvParams) -> tuple[int, ...]:
-        """Observed buses below the recovery level before any fault: shedding cannot recover
-        them, so the recovery check leaves them out (they still count in the reward)."""
-        vm = np.abs(np.asarray(self.model.v0))[self.observed]
+    def unchecked_buses(self, params: EnvParams, grid: GridModel) -> tuple[int, ...]:
+        """Observed buses below the recovery level before any fault at this operating point:
+        shedding cannot recover them, so the recovery check leaves them out (they still
+        count in the reward)."""
+        vm = np.abs(np.asarray(grid.v0))[self.observed]
         low = vm < float(params.recovery_level)
         return tuple(int(b) for b, is_low in zip(self.config.observed_buses, low) if is_low)
 
     @property
     def obs_size(self) -> int:
         """Length of one observation (before stacking)."""
-        return len(self.observed) + len(self.action_slots)
+        return len(self.observed) + len(self.action_slots) * self.config.include_action_status
 
-    def _observe(self, grid: GridState, t, task: Task, fault):
-        vm = observe(self.model, grid, t, self.config.dt, task, fault)[0][self.observed]
-        return vm, jnp.concatenate([vm, grid.load_left[self.action_slots]])
+    def _observe(self, grid: GridModel, x: GridState, t, task: Task, fault):
+        vm = observe(grid, x, t, self.config.dt, task, fault)[0][self.observed]
+        if not self.config.include_action_status:
+            return vm, vm
+        return vm, jnp.concatenate([vm, x.load_left[self.action_slots]])
 
-    def _fault(self, task: Task):
-        return network.fault_view(self.model.network, task.fault_bus, task.fault_z)
+    @staticmethod
+    def _fault(grid: GridModel, task: Task):
+        return network.fault_view(grid.network, task.fault_bus, task.fault_z)
 
-    def reset(self, key, task: Task, params: EnvParams):
+    def reset(self, key, task: Task, params: EnvParams, grid: GridModel):
         """(obs (history·n_obs,), state) at t = 0; `key` is unused (the grid is deterministic)."""
         del key
-        grid = self.model.initial
-        real = jnp.real(self.model.network.z_ss).dtype
-        vm, obs = self._observe(grid, jnp.zeros((), real), task, self._fault(task))
+        x = grid.initial
+        real = jnp.real(grid.network.z_ss).dtype
+        vm, obs = self._observe(grid, x, jnp.zeros((), real), task, self._fault(grid, task))
         history = jnp.tile(obs, (self.config.history, 1))
-        state = EnvState(grid=grid, health=healthy(real), task=task,
+        check = (vm >= params.recovery_level) & self.recovery_mask
+        state = EnvState(grid=x, health=healthy(real), task=task,
                          step=jnp.zeros((), jnp.int32), history=history,
-                         recovery_check=vm >= params.recovery_level, done=jnp.zeros((), bool))
+                         recovery_check=check, done=jnp.zeros((), bool))
         return history.reshape(-1), state
 
-    def step(self, state: EnvState, action, params: EnvParams):
+    def step(self, state: EnvState, action, params: EnvParams, grid: GridModel):
         """(obs, state, reward, done, info) after one agent step with `action` (n_action,)."""
         cfg, task = self.config, state.task
-        real = jnp.real(self.model.network.z_ss).dtype
+        real = jnp.real(grid.network.z_ss).dtype
         t = state.step.astype(real) * cfg.agent_dt
         request = -jnp.clip(action, params.action_low, params.action_high)  # >= 0
         left = state.grid.load_left[self.action_slots]
         amount = jnp.minimum(request, left)
-        grid = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
-        fault = self._fault(task)
-        grid, health = advance(self.model, grid, state.health, state.step * cfg.sim_steps,
-                               cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
+        x = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
+        fault = self._fault(grid, task)
+        x, health = advance(grid, x, state.health, state.step * cfg.sim_steps,
+                            cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
         t_next = t + cfg.agent_dt
-        vm, obs = self._observe(grid, t_next, task, fault)
+        vm, obs = self._observe(grid, x, t_next, task, fault)
         after = t_next - task.fault_end
         failed = recovery_failed(vm, state.recovery_check, after, params) | health.diverged
-        shed_pu = shed_power(amount, self.model.load_p0[self.action_slots])
+        shed_pu = shed_power(amount, grid.load_p0[self.action_slots])
         reward = (params.c_voltage * envelope_deviation(vm, after) - params.c_shed * shed_pu
                   - params.c_invalid * invalid_requests(request, left)
                   - params.c_prefault * prefault_requests(request, t, task.fault_start))
@@ -249,7 +251,7 @@ class LoadSheddingEnv:
         truncated = state.step + 1 >= cfg.n_steps
         done = failed | truncated
         history = jnp.concatenate([state.history[1:], obs[None]])
-        new = EnvState(grid=grid, health=health, task=task, step=state.step + 1,
+        new = EnvState(grid=x, health=health, task=task, step=state.step + 1,
                        history=history, recovery_check=state.recovery_check, done=done)
         info = {"terminated": failed, "truncated": truncated & ~failed,
                 "shed_pu": shed_pu,
@@ -257,7 +259,7 @@ class LoadSheddingEnv:
         return history.reshape(-1), new, reward, done, info
 
     def episode(self, policy_apply, policy_params, task: Task, params: EnvParams,
-                policy_carry=None, trace: bool = False):
+                grid: GridModel, policy_carry=None, trace: bool = False):
         """One whole episode in `lax.scan` (un-batched; `rollout` vmaps it over tasks).
 
         policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
@@ -268,7 +270,7 @@ class LoadSheddingEnv:
         (n_steps,), frozen after the episode ends.
         """
         n_observed = len(self.observed)
-        obs, state = self.reset(None, task, params)
+        obs, state = self.reset(None, task, params, grid)
 
         def step(carry, _):
             obs, state, policy_state, total, shed, failed = carry
@@ -276,7 +278,7 @@ class LoadSheddingEnv:
             action, new_policy_state = policy_apply(policy_params, obs, policy_state)
             policy_state = jax.tree.map(lambda a, b: jnp.where(live, a, b), new_policy_state,
                                         policy_state)
-            obs, new, reward, _, info = self.step(state, action, params)
+            obs, new, reward, _, info = self.step(state, action, params, grid)
             new = jax.tree.map(lambda a, b: jnp.where(live, a, b), new, state)
             total = total + jnp.where(live, reward, 0.0)
             shed_now = jnp.where(live, info["shed_pu"], 0.0)
@@ -295,10 +297,9 @@ class LoadSheddingEnv:
         return out
 
     def rollout(self, policy_apply, policy_params, tasks: Task, params: EnvParams,
-                policy_carry=None, trace: bool = False):
-        """`episode` vmapped over a batch of tasks (leading axis); the policy is shared.
-
-        Every entry of the returned dict gains a leading batch axis.
+                grid: GridModel, policy_carry=None, trace: bool = False):
+        """`episode` vmapped over a batch of tasks (leading axis) at one operating point
+        `grid`; the policy is shared. Every entry of the returned dict gains a leading axis.
         """
         return jax.vmap(lambda task: self.episode(policy_apply, policy_params, task, params,
-                                                  policy_carry, trace))(tasks)
+                                                  grid, policy_carry, trace))(tasks)

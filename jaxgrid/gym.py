@@ -3,19 +3,21 @@
 `LoadSheddingGymEnv` wraps the functional `LoadSheddingEnv` in the stateful `gymnasium.Env`
 API (Gymnasium >= 1.0: `reset(seed, options) -> (obs, info)`,
 `step(action) -> (obs, reward, terminated, truncated, info)`), for agents written against
-Gymnasium. Importing this module registers the study's two tasks:
+Gymnasium. Importing this module registers the built-in studies and a generic id:
 
     import gymnasium
     import jaxgrid.gym  # registers the ids below
     env = gymnasium.make("jaxgrid/IEEE39-FIDVR-v0")          # or "jaxgrid/IEEE300-FIDVR-v0"
+    env = gymnasium.make("jaxgrid/FIDVR-v0", study="studies/ieee39_pnnl.toml")  # any study
     env = gymnasium.make("jaxgrid.gym:jaxgrid/IEEE39-FIDVR-v0")  # imports jaxgrid.gym itself
 
 Keyword arguments of `gymnasium.make` go to the constructor, e.g.
-`gymnasium.make("jaxgrid/IEEE39-FIDVR-v0", load_level=1.2, config={"episode": 6.0})`.
+`gymnasium.make("jaxgrid/FIDVR-v0", study=builtin("ieee39_fidvr", (0.9, 1.0, 1.1)),
+config={"episode": 6.0})`.
 
-Every `reset` draws one task from the constructor's `tasks` (default: the study's training
-faults, `jaxgrid.tasks.study_task_set(case, "train")`) with the env's seeded
-`np_random`, or takes `options={"task": FaultEvent | None}`. One episode is one task; the
+Every `reset` draws one task (operating point and fault) from the constructor's `tasks`
+(default: the study's training set) with the env's seeded `np_random`, or takes
+`options={"task": FaultEvent | None, "point": int}`. One episode is one task; the
 observation, action, reward, `terminated` (recovery failed or the simulation diverged) and
 `truncated` (episode length reached) are those of `LoadSheddingEnv` (see its module docstring
 and the PNNL PARS study: Huang et al., "Accelerated deep reinforcement learning based load
@@ -34,37 +36,27 @@ import jax.numpy as jnp
 import numpy as np
 from gymnasium import spaces
 
-from jaxgrid import cases
-from jaxgrid.env import EnvParams, LoadSheddingEnv, study_params
+from jaxgrid.env import EnvParams
 from jaxgrid.simulate import FaultEvent, make_task
+from jaxgrid.study import Study, load_study
+from jaxgrid.tasks import TaskSpec
 
-# Registered ids -> the built-in study case they wrap.
-ENV_IDS = {"jaxgrid/IEEE39-FIDVR-v0": "ieee39_fidvr", "jaxgrid/IEEE300-FIDVR-v0": "ieee300_fidvr"}
-
-
-def training_faults(case: str) -> list[FaultEvent | None]:
-    """The study's training faults of a built-in case (None: the no-fault task)."""
-    from jaxgrid.tasks import study_task_set
-
-    try:
-        specs = study_task_set(case, "train")
-    except ValueError as err:
-        raise ValueError(f"{err}; pass tasks=[FaultEvent | None, ...]") from None
-    return [spec.event() for spec in specs]
+# Registered ids -> the study they wrap (None: the `study` keyword names it).
+ENV_IDS = {"jaxgrid/IEEE39-FIDVR-v0": "ieee39_fidvr", "jaxgrid/IEEE300-FIDVR-v0": "ieee300_fidvr",
+           "jaxgrid/FIDVR-v0": None}
 
 
 class LoadSheddingGymEnv(gymnasium.Env):
     """One FIDVR load-shedding episode at a time behind the Gymnasium API.
 
     Args:
-      case: built-in study case, "ieee39_fidvr" or "ieee300_fidvr".
-      load_level: operating point of the case (factor on every load and dispatch).
-      tasks: faults `reset` draws from, each a `FaultEvent` or None (no fault); default the
-        study's training faults of the case (`training_faults`).
-      config: overrides of `EnvConfig.for_study` fields, e.g. {"episode": 6.0} (s),
+      study: a `Study`, or a built-in study name or study file (`jaxgrid.study.load_study`).
+      tasks: tasks `reset` draws from, each a `TaskSpec` (operating point and fault), a
+        `FaultEvent` or None (no fault; both at operating point 0); default the study's
+        training set.
+      config: overrides of the study's `EnvConfig` fields, e.g. {"episode": 6.0} (s),
         {"history": 3}.
-      params: reward and action values (`EnvParams`), default the study's for the case
-        (`jaxgrid.env.study_params`).
+      params: reward and action values (`EnvParams`), default the study's.
 
     Spaces (float32):
       observation: (history·(n_observed + n_action),) the voltage magnitude at the observed
@@ -76,63 +68,75 @@ class LoadSheddingGymEnv(gymnasium.Env):
 
     `info` of `step`: "terminated", "truncated", "diverged" (bool), "shed_pu" (load shed this
     step, p.u. system base), "time" (s after the step). `info` of `reset`: "task" (the
-    FaultEvent or None of the episode), "time" (0.0). Stepping after the episode ended goes
+    FaultEvent or None of the episode), "point" (its operating point), "time" (0.0).
+    Stepping after the episode ended goes
     on simulating; call `reset`.
     """
 
     metadata = {"render_modes": []}
 
-    def __init__(self, case: str = "ieee39_fidvr", load_level: float = 1.0,
-                 tasks: Sequence[FaultEvent | None] | None = None,
+    def __init__(self, study: Study | str = "ieee39_fidvr",
+                 tasks: Sequence[TaskSpec | FaultEvent | None] | None = None,
                  config: Mapping[str, Any] | None = None, params: EnvParams | None = None):
-        self.study = cases.load(case, load_level=load_level)
-        self.env = LoadSheddingEnv.for_study(self.study, **dict(config or {}))
-        self.params = params if params is not None else study_params(case)
-        self.tasks = tuple(training_faults(case) if tasks is None else tasks)
+        if study is None:
+            raise ValueError("jaxgrid/FIDVR-v0 needs study=NAME|FILE|Study")
+        self.study = study if isinstance(study, Study) else load_study(str(study))
+        self.env = self.study.env(**dict(config or {}))
+        self.params = params if params is not None else self.study.params
+        self.tasks = tuple(self.study.tasks("train") if tasks is None else
+                           (_spec(t, k) for k, t in enumerate(tasks)))
         if not self.tasks:
-            raise ValueError("tasks = []: give at least one FaultEvent or None")
-        for k, fault in enumerate(self.tasks):
-            if fault is not None and not isinstance(fault, FaultEvent):
-                raise ValueError(f"tasks[{k}] = {fault!r} ({type(fault).__name__}): must be a "
-                                 "FaultEvent or None")
-        self._task_arrays = [make_task(self.env.model, f) for f in self.tasks]
-        self._x64 = self.env.model.precision == "float64"
+            raise ValueError("tasks = []: give at least one TaskSpec, FaultEvent or None")
+        self._grids = [jax.device_put(self.study.point(k)) for k in range(self.study.n_points)]
+        for spec in self.tasks:
+            self._point(spec.operating_point)
+        self._x64 = self.env.precision == "float64"
 
         cfg, n_observed = self.env.config, len(self.env.observed)
+        n_action = len(self.env.action_slots)
         one_low = np.zeros(self.env.obs_size, np.float32)
         one_high = np.concatenate([np.full(n_observed, cfg.bounds.max_voltage, np.float32),
-                                   np.ones(len(self.env.action_slots), np.float32)])
+                                   np.ones(self.env.obs_size - n_observed, np.float32)])
         self.observation_space = spaces.Box(np.tile(one_low, cfg.history),
                                             np.tile(one_high, cfg.history), dtype=np.float32)
-        n_action = len(self.env.action_slots)
         self.action_space = spaces.Box(np.float32(self.params.action_low),
                                        np.float32(self.params.action_high), shape=(n_action,),
                                        dtype=np.float32)
 
         env = self.env
-        self._reset_fn = jax.jit(lambda task, params: env.reset(None, task, params))
+        self._reset_fn = jax.jit(lambda task, params, grid: env.reset(None, task, params, grid))
         self._step_fn = jax.jit(env.step)
-        self._state = None
+        self._state = self._grid = None
+
+    def _point(self, point) -> int:
+        if isinstance(point, bool) or not isinstance(point, (int, np.integer)) or not (
+                0 <= point < self.study.n_points):
+            raise ValueError(f"operating point {point!r}: the study has {self.study.n_points} "
+                             f"(0 to {self.study.n_points - 1})")
+        return int(point)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """(obs (n_obs,) float32, info) of a new episode; see the class docstring."""
         super().reset(seed=seed)
         options = dict(options or {})
-        unknown = sorted(set(options) - {"task"})
+        unknown = sorted(set(options) - {"task", "point"})
         if unknown:
-            raise ValueError(f"reset options {unknown}: allowed 'task' (FaultEvent or None)")
-        if "task" in options:
-            fault = options["task"]
+            raise ValueError(f"reset options {unknown}: allowed 'task' (FaultEvent or None) "
+                             "and 'point' (operating point index)")
+        if "task" in options or "point" in options:
+            fault = options.get("task")
             if fault is not None and not isinstance(fault, FaultEvent):
                 raise ValueError(f"options['task'] = {fault!r} ({type(fault).__name__}): must "
                                  "be a FaultEvent or None")
-            task = make_task(self.env.model, fault)
+            point = self._point(options.get("point", 0))
         else:
-            k = int(self.np_random.integers(len(self.tasks)))
-            fault, task = self.tasks[k], self._task_arrays[k]
+            spec = self.tasks[int(self.np_random.integers(len(self.tasks)))]
+            fault, point = spec.event(), spec.operating_point
+        self._grid = self._grids[point]
         with jax.enable_x64(self._x64):
-            obs, self._state = self._reset_fn(task, self.params)
-        return np.asarray(obs, np.float32), {"task": fault, "time": 0.0}
+            obs, self._state = self._reset_fn(make_task(self.study.point(0), fault),
+                                              self.params, self._grid)
+        return np.asarray(obs, np.float32), {"task": fault, "point": point, "time": 0.0}
 
     def step(self, action):
         """(obs, reward, terminated, truncated, info) after one agent step (agent_dt s)."""
@@ -144,20 +148,32 @@ class LoadSheddingGymEnv(gymnasium.Env):
                              "(one value per action bus)")
         with jax.enable_x64(self._x64):
             obs, self._state, reward, _, info = self._step_fn(self._state, jnp.asarray(action),
-                                                              self.params)
+                                                              self.params, self._grid)
         info = {key: value.item() for key, value in jax.device_get(info).items()}
         info["time"] = round(int(self._state.step) * self.env.config.agent_dt, 9)
         return (np.asarray(obs, np.float32), float(reward), bool(info["terminated"]),
                 bool(info["truncated"]), info)
 
 
+def _spec(task, k: int) -> TaskSpec:
+    """A TaskSpec from a constructor task (FaultEvent or None: at operating point 0)."""
+    if isinstance(task, TaskSpec):
+        return task
+    if task is None:
+        return TaskSpec(0, 0.0)
+    if isinstance(task, FaultEvent):
+        return TaskSpec(task.bus, task.duration, task.start, 0, task.r, task.x)
+    raise ValueError(f"tasks[{k}] = {task!r} ({type(task).__name__}): must be a TaskSpec, a "
+                     "FaultEvent or None")
+
+
 def _register() -> None:
-    for env_id, case in ENV_IDS.items():
+    for env_id, study in ENV_IDS.items():
         if env_id not in gymnasium.registry:
             gymnasium.register(id=env_id, entry_point=f"{__name__}:LoadSheddingGymEnv",
-                               kwargs={"case": case})
+                               kwargs={"study": study})
 
 
 _register()
 
-__all__ = ["ENV_IDS", "LoadSheddingGymEnv", "training_faults"]
+__all__ = ["ENV_IDS", "LoadSheddingGymEnv"]

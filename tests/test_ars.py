@@ -17,10 +17,11 @@ from ars.policies import Policy, PolicySpec
 TARGETS = jnp.array([[-0.05, -0.15], [-0.10, -0.02], [-0.18, -0.08], [-0.12, -0.12]])
 
 
-def quadratic_episode(apply, params, task, carry):
-    """One step: observe the task's target (2,), act, earn −100·|action − target|²."""
+def quadratic_episode(apply, params, task, carry, scale=1.0):
+    """One step: observe the task's target (2,), act, earn −100·scale·|action − target|²
+    (`scale`: the iteration's data)."""
     action, carry = apply(params, task, carry)
-    return {"reward": -100.0 * jnp.sum((action - task) ** 2), "policy_carry": carry}
+    return {"reward": -100.0 * scale * jnp.sum((action - task) ** 2), "policy_carry": carry}
 
 
 def test_update_equals_the_hand_computed_one():
@@ -81,10 +82,10 @@ def quadratic():
 
 
 def _train(policy, config, iterations, mesh=None):
-    iteration = make_iteration(quadratic_episode, policy, config, TARGETS, mesh)
+    iteration = make_iteration(quadratic_episode, policy, config, mesh=mesh)
     state, history = init_state(policy, config), []
     for _ in range(iterations):
-        state, metrics = iteration(state)
+        state, metrics = iteration(state, TARGETS, 1.0)
         history.append(float(metrics["reward_mean"]))
     return state, history, iteration
 
@@ -127,5 +128,31 @@ def test_bad_hyper_parameters_are_named(quadratic):
         ParsConfig(directions=8, top=9)
     with pytest.raises(ValueError, match="decay = 1.5"):
         ParsConfig(decay=1.5)
+    iteration = make_iteration(quadratic_episode, policy, ParsConfig(tasks_per_iteration=5))
     with pytest.raises(ValueError, match="tasks_per_iteration = 5: only 4 tasks"):
-        make_iteration(quadratic_episode, policy, ParsConfig(tasks_per_iteration=5), TARGETS)
+        iteration(init_state(policy, config), TARGETS, 1.0)
+    with pytest.raises(ValueError, match="2·directions = 6 perturbed policies do not split "
+                                         "over 4 devices"):
+        make_iteration(quadratic_episode, policy, ParsConfig(directions=3, top=1),
+                       mesh=Mesh(np.array(jax.devices()[:1] * 4).reshape(4), ("batch",)))
+
+
+def test_tasks_data_and_sampler_are_arguments(quadratic):
+    """New tasks or data of the same shapes reuse the compilation; a sampler picks the tasks."""
+    policy, config = quadratic
+    picked = []
+
+    def sample(key):
+        return jax.random.randint(key, (config.tasks_per_iteration,), 0, 2)
+
+    def episode(apply, params, task, carry, scale):
+        return quadratic_episode(apply, params, task, carry, scale)
+
+    iteration = make_iteration(episode, policy, config, sample)
+    state = init_state(policy, config)
+    for targets, scale in ((TARGETS, 1.0), (TARGETS[::-1], 1.0), (TARGETS, 0.0)):
+        _, metrics = iteration(state, targets, scale)
+        picked.append(float(metrics["reward_mean"]))
+    assert iteration.compiled._cache_size() == 1
+    assert picked[2] == 0.0 and picked[0] < 0.0, "the data scales the reward"
+    assert picked[0] != picked[1], "the sampler indexes the tasks given"

@@ -43,8 +43,9 @@ def study(request) -> StudyCase:
 
 @pytest.fixture(scope="module")
 def model(study):
-    """Strict compile (every record supported, ACMTBLU1 included), float32."""
-    return study.compile()
+    """Strict compile (every record supported, ACMTBLU1 included), float32; the action buses
+    are the load slots, as `jaxgrid.study.builtin` compiles them."""
+    return compile_model(study.case, study.dyr, CompileOptions(load_buses=study.action_buses))
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,8 @@
 """The load-shedding environment: each reward term by hand, then whole steps and episodes.
 
-Episodes run on the built-in ieee39_fidvr case, shortened to 6 s (the fault at 1 s and the
-4 s recovery check still fit), with one compiled rollout shared by the tests.
+Episodes run on the built-in ieee39_fidvr study, shortened to 6 s (the fault at 1 s and the
+4 s recovery check still fit), with one compiled rollout shared by the tests. The grid model
+is an argument of every call.
 """
 from __future__ import annotations
 
@@ -10,10 +11,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrid import cases
-from jaxgrid.env import (EnvParams, LoadSheddingEnv, envelope_deviation, invalid_requests,
-                         prefault_requests, recovery_failed, shed_power, study_params)
+from jaxgrid.env import (EnvParams, envelope_deviation, invalid_requests, prefault_requests,
+                         recovery_failed, shed_power)
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
+from jaxgrid.study import builtin
 
 
 @pytest.mark.parametrize("t_after, expected", [
@@ -49,31 +50,40 @@ def test_recovery_check_by_hand():
 
 
 @pytest.fixture(scope="module")
-def env():
-    study = cases.load("ieee39_fidvr")
-    return LoadSheddingEnv.for_study(study, episode=6.0)
+def study():
+    return builtin("ieee39_fidvr")
 
 
 @pytest.fixture(scope="module")
-def tasks(env):
+def env(study):
+    return study.env(episode=6.0)
+
+
+@pytest.fixture(scope="module")
+def grid(study):
+    return study.point(0)
+
+
+@pytest.fixture(scope="module")
+def tasks(grid):
     """[no fault, bus-4 0.02 s (recovers), bus-4 0.08 s (FIDVR)]."""
     faults = [None, FaultEvent(4, 1.0, 0.02), FaultEvent(4, 1.0, 0.08)]
-    return [make_task(env.model, f) for f in faults]
+    return [make_task(grid, f) for f in faults]
 
 
-def test_pre_fault_shedding_step_by_hand(env, tasks):
+def test_pre_fault_shedding_step_by_hand(env, grid, tasks):
     params = EnvParams()
     step = jax.jit(env.step)
-    obs, state = env.reset(None, tasks[2], params)
+    obs, state = env.reset(None, tasks[2], params, grid)
     assert obs.shape == (env.obs_size,)
     action = jnp.array([-0.2, 0.0, 0.0])  # shed 20 % at 504, before the fault
-    p0 = float(env.model.load_p0[env.action_slots[0]])
-    obs, state, reward, done, info = step(state, action, params)
+    p0 = float(grid.load_p0[env.action_slots[0]])
+    obs, state, reward, done, info = step(state, action, params, grid)
     assert float(reward) == pytest.approx(-150.0 * 0.2 * p0 - 100.0, rel=1e-5)
     assert float(obs[-3]) == pytest.approx(0.8) and not bool(done)
     empty = state.replace(grid=state.grid.replace(
         load_left=state.grid.load_left.at[env.action_slots[0]].set(0.0)))
-    _, _, reward, _, info = step(empty, action, params)
+    _, _, reward, _, info = step(empty, action, params, grid)
     assert float(reward) == pytest.approx(-3.0 - 100.0, rel=1e-6), "invalid + pre-fault only"
     assert float(info["shed_pu"]) == 0.0
 
@@ -88,10 +98,10 @@ def shed_after_fault(params, obs, carry):
 
 
 @pytest.fixture(scope="module")
-def episodes(env, tasks):
+def episodes(env, grid, tasks):
     run = jax.jit(env.rollout, static_argnums=0)
     batch = stack_tasks(tasks)
-    return {name: run(policy, None, batch, EnvParams(), jnp.zeros((3,), jnp.int32))
+    return {name: run(policy, None, batch, EnvParams(), grid, jnp.zeros((3,), jnp.int32))
             for name, policy in (("none", zero_policy), ("shed", shed_after_fault))}, run
 
 
@@ -104,34 +114,44 @@ def test_uncontrolled_fidvr_fails_recovery_mild_fault_does_not(episodes):
     assert int(out["steps"][2]) < int(out["steps"][0]) == 60, "failure ends the episode"
 
 
-def test_shedding_policy_is_charged_for_the_load(episodes, env):
+def test_shedding_policy_is_charged_for_the_load(episodes, env, grid):
     out = episodes[0]["shed"]
-    expected = 0.2 * float(np.sum(np.asarray(env.model.load_p0)[env.action_slots]))
+    expected = 0.2 * float(np.sum(np.asarray(grid.load_p0)[env.action_slots]))
     assert np.asarray(out["shed_pu"]) == pytest.approx([expected] * 3, rel=1e-5)
 
 
-def test_vmap_equals_one_at_a_time(episodes, tasks):
+def test_vmap_equals_one_at_a_time(episodes, grid, tasks):
     batched, run = episodes
     for k, task in enumerate(tasks):
-        one = run(shed_after_fault, None, stack_tasks([task]), EnvParams(),
+        one = run(shed_after_fault, None, stack_tasks([task]), EnvParams(), grid,
                   jnp.zeros((1, 3), jnp.int32)[0])
         for key in ("reward", "shed_pu", "steps"):
             assert float(one[key][0]) == pytest.approx(float(batched["shed"][key][k]),
                                                        rel=1e-5, abs=1e-4), key
 
 
-def test_buses_below_the_recovery_level_before_the_fault_are_not_checked(env):
+def test_buses_below_the_recovery_level_before_the_fault_are_not_checked(env, grid):
     params = EnvParams()
-    assert env.unchecked_buses(params) == ()  # the built-in 39-bus case starts >= 0.984
+    assert env.unchecked_buses(params, grid) == ()  # the built-in 39-bus case starts >= 0.984
     strict = EnvParams(recovery_level=0.995)  # above 507 (0.994) and 508 (0.990) at rest
-    _, state = env.reset(None, make_task(env.model, None), strict)
-    assert env.unchecked_buses(strict) == (507, 508)
+    _, state = env.reset(None, make_task(grid, None), strict, grid)
+    assert env.unchecked_buses(strict, grid) == (507, 508)
     expected = [b not in (507, 508) for b in env.config.observed_buses]
     assert np.asarray(state.recovery_check).tolist() == expected
 
 
-def test_study_params_per_case():
-    assert study_params("ieee39_fidvr_load110") == EnvParams()
-    assert study_params("ieee300_fidvr") == EnvParams(c_voltage=30.0, unstable_penalty=10000.0)
-    with pytest.raises(ValueError, match="no study parameters for case 'ieee14'"):
-        study_params("ieee14")
+def test_recovery_buses_and_action_status_switches(study, grid):
+    """recovery_buses narrows the check; include_action_status off drops the load fractions
+    (PNNL includeActionStatusInObservations) from the observation."""
+    env = study.env(recovery_buses=(4, 504), include_action_status=False)
+    obs, state = env.reset(None, make_task(grid, None), EnvParams(), grid)
+    assert obs.shape == (8,) and env.obs_size == 8
+    assert np.asarray(state.recovery_check).tolist() == [True, True] + [False] * 6
+    with pytest.raises(ValueError, match=r"recovery_buses \[99\] are not observed buses"):
+        study.env(recovery_buses=(99,))
+
+
+def test_study_params_per_built_in_case(study):
+    assert study.params == EnvParams()
+    assert builtin("ieee300_fidvr").params == EnvParams(c_voltage=30.0,
+                                                        unstable_penalty=10000.0)

@@ -1,4 +1,4 @@
-"""The evaluation command on the 39-bus study case: JSON layout, counts, figures."""
+"""The evaluation command on the 39-bus study: JSON layout, counts, figures, task files."""
 from __future__ import annotations
 
 import json
@@ -6,11 +6,17 @@ import json
 import pytest
 
 from experiments.evaluate import evaluate, main
+from jaxgrid.study import builtin
 
 
 @pytest.fixture(scope="module")
-def uncontrolled():
-    return evaluate("ieee39_fidvr", "none", "test")
+def study():
+    return builtin("ieee39_fidvr")
+
+
+@pytest.fixture(scope="module")
+def uncontrolled(study):
+    return evaluate(study, "none", "test")
 
 
 def test_uncontrolled_test_set_fails_some_tasks_and_not_others(uncontrolled):
@@ -30,8 +36,8 @@ def test_uncontrolled_test_set_fails_some_tasks_and_not_others(uncontrolled):
 
 
 @pytest.fixture(scope="module")
-def relays():
-    return evaluate("ieee39_fidvr", "uvls", "test")
+def relays(study):
+    return evaluate(study, "uvls", "test")
 
 
 def test_uvls_sheds_on_the_failing_tasks_only(uncontrolled, relays):
@@ -46,15 +52,35 @@ def test_uvls_sheds_on_the_failing_tasks_only(uncontrolled, relays):
     assert relays["summary"]["mean_reward"] > uncontrolled["summary"]["mean_reward"]
 
 
-def test_cli_writes_the_documented_json_and_figures(tmp_path):
+def test_cli_writes_the_documented_json_figures_and_study(tmp_path):
     out = tmp_path / "results.json"
-    assert main(["--case", "ieee39_fidvr", "--controller", "none", "--tasks", "train",
+    assert main(["--study", "ieee39_fidvr", "--controller", "none", "--tasks", "train",
                  "--out", str(out), "--plot", str(tmp_path / "figs"), "--plot-count", "2"]) == 0
     data = json.loads(out.read_text())
-    assert set(data) == {"case", "controller", "tasks", "summary"}
-    assert set(data["tasks"][0]) == {"fault_bus", "fault_duration", "operating_point", "reward",
-                                     "shed_mw", "recovered"}
+    assert set(data) == {"study", "controller", "points", "tasks", "summary"}
+    assert set(data["tasks"][0]) == {"fault_bus", "fault_duration", "fault_start",
+                                     "operating_point", "point", "reward", "shed_mw",
+                                     "recovered"}
     assert set(data["summary"]) == {"n_tasks", "n_recovered", "mean_reward", "total_shed_mw"}
-    assert data["summary"]["n_tasks"] == 9
+    assert data["summary"]["n_tasks"] == 9 and data["points"] == ["load100"]
     assert len(list((tmp_path / "figs").glob("*.png"))) == 2
+    again = tmp_path / "again.json"
+    assert main(["--study", str(out.with_suffix(".study.toml")), "--tasks", "train",
+                 "--out", str(again)]) == 0, "the saved study reproduces the run"
+    assert json.loads(again.read_text())["tasks"] == data["tasks"]
     assert main(["--controller", "ppo", "--out", str(out)]) == 2
+    assert main(["--tasks", "holdout", "--out", str(out)]) == 2
+
+
+def test_a_pnnl_task_file_crossed_with_the_operating_points(shared_cases, tmp_path):
+    """--tasks FILE.json: the file's fault candidates at every operating point of the study."""
+    out = tmp_path / "file.json"
+    task = shared_cases / "ieee39/IEEE39_RL_loadShedding_3motor_continuous_reducedActionRange_" \
+                          "gp.json"
+    assert main(["--study", "ieee39_fidvr", "--load-levels", "0.9", "1.1", "--tasks",
+                 str(task), "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["points"] == ["load90", "load110"]
+    assert data["summary"]["n_tasks"] == 2 * 3 * 3, "2 points x buses 4, 15, 21 x 3 durations"
+    assert {(t["point"], t["fault_bus"]) for t in data["tasks"]} == {
+        (p, b) for p in (0, 1) for b in (4, 15, 21)}

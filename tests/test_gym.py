@@ -16,8 +16,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from jaxgrid.env import EnvParams
-from jaxgrid.gym import ENV_IDS, LoadSheddingGymEnv, training_faults  # registers the ids
+from jaxgrid.gym import ENV_IDS, LoadSheddingGymEnv  # registers the ids
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
+from jaxgrid.study import builtin
 
 FIDVR_FAULT = FaultEvent(4, 1.0, 0.08)  # fails recovery without control (tests/test_env.py)
 # Sum of 60 float32 step rewards (gym) against the rollout's in-scan float32 sum: same
@@ -43,9 +44,10 @@ def test_ieee39_spaces_and_default_tasks(env39):
     assert env39.action_space.shape == (3,)
     assert env39.action_space.low.tolist() == [pytest.approx(-0.2)] * 3
     assert env39.action_space.high.tolist() == [0.0] * 3
-    assert len(env39.tasks) == 9 and env39.tasks.count(None) == 3, \
+    faults = [spec.event() for spec in env39.tasks]
+    assert len(faults) == 9 and faults.count(None) == 3, \
         "buses 4, 15, 21 x durations 0 (no fault), 0.05, 0.08 s"
-    assert FaultEvent(21, 1.0, 0.08) in env39.tasks
+    assert FaultEvent(21, 1.0, 0.08) in faults
 
 
 def test_check_env_passes(env39):
@@ -61,10 +63,12 @@ def test_seeded_reset_is_deterministic_and_options_pick_the_task(env39):
     drawn = [env39.reset(seed=s)[1]["task"] for s in range(40)]
     assert drawn == [env39.reset(seed=s)[1]["task"] for s in range(40)]
     assert len(set(drawn)) > 1, "different seeds draw different tasks"
-    assert set(drawn) <= set(env39.tasks)
+    assert set(drawn) <= {spec.event() for spec in env39.tasks}
     obs, info = env39.reset(seed=0, options={"task": FIDVR_FAULT})
-    assert info["task"] == FIDVR_FAULT and obs.dtype == np.float32
+    assert info["task"] == FIDVR_FAULT and info["point"] == 0 and obs.dtype == np.float32
     assert env39.reset(options={"task": None})[1]["task"] is None
+    with pytest.raises(ValueError, match=r"operating point 1: the study has 1"):
+        env39.reset(options={"point": 1})
     with pytest.raises(ValueError, match="allowed 'task'"):
         env39.reset(options={"fault": FIDVR_FAULT})
     with pytest.raises(ValueError, match="FaultEvent or None"):
@@ -75,8 +79,10 @@ def test_bad_action_shape_and_bad_tasks_are_rejected(env39):
     env39.reset(seed=0)
     with pytest.raises(ValueError, match="one value per action bus"):
         env39.step(np.zeros(4, np.float32))
-    with pytest.raises(ValueError, match="no default task set"):
-        training_faults("ieee39")
+    with pytest.raises(ValueError, match=r"tasks\[1\] = 4 \(int\): must be a TaskSpec"):
+        LoadSheddingGymEnv(env39.study, tasks=[None, 4])
+    with pytest.raises(ValueError, match="needs study=NAME"):
+        gymnasium.make("jaxgrid/FIDVR-v0")
 
 
 def test_zero_action_fidvr_episode_terminates_like_rollout(env39):
@@ -96,17 +102,26 @@ def test_zero_action_fidvr_episode_terminates_like_rollout(env39):
     def zero_policy(params, obs, carry):
         return jnp.zeros(3), carry
 
-    batch = stack_tasks([make_task(env39.env.model, FIDVR_FAULT)])
-    out = jax.jit(env39.env.rollout, static_argnums=0)(zero_policy, None, batch, EnvParams())
+    grid = env39.study.point(0)
+    batch = stack_tasks([make_task(grid, FIDVR_FAULT)])
+    out = jax.jit(env39.env.rollout, static_argnums=0)(zero_policy, None, batch, EnvParams(),
+                                                        grid)
     assert int(out["steps"][0]) == steps and not bool(out["recovered"][0])
     assert total == pytest.approx(float(out["reward"][0]), rel=REWARD_RTOL)
 
 
-def test_step_is_compiled_once(env39):
-    for fault in (None, FIDVR_FAULT, FaultEvent(15, 1.0, 0.05)):
-        env39.reset(options={"task": fault})
-        env39.step(env39.action_space.sample())
-    assert env39._step_fn._cache_size() == 1 and env39._reset_fn._cache_size() == 1
+def test_step_is_compiled_once_across_operating_points():
+    env = gymnasium.make("jaxgrid/FIDVR-v0", study=builtin("ieee39_fidvr", (0.9, 1.1)),
+                         config={"episode": 0.3}).unwrapped
+    assert {spec.operating_point for spec in env.tasks} == {0, 1}, "the training set, 2 points"
+    volts = []
+    for point, fault in ((0, None), (1, FIDVR_FAULT), (1, FaultEvent(15, 1.0, 0.05))):
+        obs, info = env.reset(options={"task": fault, "point": point})
+        assert info["point"] == point
+        volts.append(obs[:8])
+        env.step(env.action_space.sample())
+    assert env._step_fn._cache_size() == 1 and env._reset_fn._cache_size() == 1
+    assert np.abs(volts[0] - volts[1]).max() > 1e-3, "the load levels start at other voltages"
 
 
 def test_ieee300_makes_resets_and_steps():

@@ -1,8 +1,9 @@
 """The training command: a run killed with SIGKILL resumes from its last checkpoint, loses
 at most --checkpoint-every iterations, and ends where an uninterrupted run ends; two
 processes joined by `jax.distributed` on loopback end where one process does; the saved
-policy loads into the evaluation command. Tiny settings (linear policy, 1 direction, 1 task,
-0.5 s episodes) keep it to a few compiles."""
+policy and study load into the evaluation command; the PNNL 300-bus GridPACK files train
+from their own files. Tiny settings (linear policy, 1 direction, 1 task, 0.5 s episodes) keep
+it to a few compiles."""
 from __future__ import annotations
 
 import json
@@ -20,6 +21,7 @@ from conftest import REPO
 from experiments.evaluate import evaluate
 from experiments.train import main
 from experiments.train_39bus import DEFAULTS
+from jaxgrid.study import builtin, read_study
 
 TINY = ["--policy", "linear", "--history", "1", "--directions", "1", "--top", "1",
         "--tasks-per-iteration", "1", "--episode", "0.5", "--checkpoint-every", "3",
@@ -33,7 +35,7 @@ def _lines(path):
 @pytest.fixture(scope="module")
 def straight(tmp_path_factory):
     out = tmp_path_factory.mktemp("straight")
-    assert main("ieee39_fidvr", DEFAULTS, TINY + ["--iterations", "12", "--out", str(out)]) == 0
+    assert main(TINY + ["--iterations", "12", "--out", str(out)], DEFAULTS) == 0
     return out
 
 
@@ -45,14 +47,14 @@ import experiments.train as train
 from experiments.train_39bus import DEFAULTS
 build = train.build
 def hanging_build(*args, **kwargs):
-    iteration, policy, spec = build(*args, **kwargs)
-    def hang_after_7(state):
+    trainer = build(*args, **kwargs)
+    def hang_after_7(state, tasks, data):
         if int(state.iteration) >= 7:
             time.sleep(3600)
-        return iteration(state)
-    return hang_after_7, policy, spec
+        return trainer.iteration(state, tasks, data)
+    return trainer._replace(iteration=hang_after_7)
 train.build = hanging_build
-sys.exit(train.main("ieee39_fidvr", DEFAULTS, sys.argv[1:]))
+sys.exit(train.main(sys.argv[1:], DEFAULTS))
 """
 
 
@@ -71,8 +73,7 @@ def test_sigkill_mid_training_resumes_and_matches_an_uninterrupted_run(tmp_path,
     assert len(_lines(metrics)) == 7, "the run did not get going"
     kept = [int(p.name) for p in (out / "checkpoints").iterdir() if p.name.isdigit()]
     assert max(kept) == 6, f"killed after 7 iterations, last checkpoint {max(kept)}"
-    assert main("ieee39_fidvr", DEFAULTS, TINY + ["--iterations", "12", "--resume",
-                                                  "--out", str(out)]) == 0
+    assert main(TINY + ["--iterations", "12", "--resume", "--out", str(out)], DEFAULTS) == 0
     rows = [json.loads(line) for line in _lines(metrics)]
     assert [r["iteration"] for r in rows] == list(range(1, 13)), "one line per iteration"
     assert max(int(p.name) for p in (out / "checkpoints").iterdir() if p.name.isdigit()) == 12
@@ -116,32 +117,46 @@ def test_two_processes_on_loopback_match_one_process(tmp_path, straight):
 
 
 def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_path, capsys):
-    result = evaluate("ieee39_fidvr", f"policy:{straight / 'policy'}", "train")
+    study = read_study(straight / "study.toml")
+    assert study.definition == builtin("ieee39_fidvr").definition, "the run's study is saved"
+    result = evaluate(study, f"policy:{straight / 'policy'}", "train")
     assert result["summary"]["n_tasks"] == 9
     assert (straight / "learning_curve.png").is_file()
     kept = sorted(p.name for p in (straight / "policies").iterdir())
     assert kept == ["00003", "00006", "00009", "00012"], "a policy at every checkpoint"
     last, final = (np.load(straight / d / "policy.npz") for d in ("policies/00012", "policy"))
     np.testing.assert_array_equal(last["theta"], final["theta"])
-    assert main("ieee39_fidvr", DEFAULTS, TINY + ["--resume", "--out", str(tmp_path)]) == 2
+    assert main(TINY + ["--resume", "--out", str(tmp_path)], DEFAULTS) == 2
     assert "no checkpoint" in capsys.readouterr().err
-    assert main("ieee39_fidvr", DEFAULTS, TINY + ["--resume", "--iterations", "6",
-                                                  "--out", str(straight)]) == 2
+    assert main(TINY + ["--resume", "--iterations", "6", "--out", str(straight)], DEFAULTS) == 2
     assert "past --iterations 6" in capsys.readouterr().err
     before = (straight / "metrics.jsonl").read_text()
-    assert main("ieee39_fidvr", DEFAULTS, TINY + ["--out", str(straight)]) == 2
+    assert main(TINY + ["--out", str(straight)], DEFAULTS) == 2
     assert "pass --resume" in capsys.readouterr().err
     assert (straight / "metrics.jsonl").read_text() == before, "a fresh run loses nothing"
 
 
-def test_short_300_bus_run_goes_through_the_full_path(tmp_path):
-    from experiments.train_300bus import DEFAULTS as DEFAULTS_300
-    args = ["--hidden", "8,8", "--directions", "2", "--top", "1", "--tasks-per-iteration", "2",
-            "--episode", "0.5", "--iterations", "3", "--checkpoint-every", "2",
+def test_the_300_bus_gridpack_files_train_from_their_own_files(shared_cases, tmp_path):
+    """The PNNL GridPACK pair with its LSTM multi-operating-point training file (zone-1
+    observation scope, 34 action buses, 8 fault buses), a few stratified iterations, then a
+    resume that reads the run folder's study.toml alone."""
+    folder = shared_cases / "ieee300"
+    args = ["--raw", str(folder / "IEEE300Bus_modified_noHVDC_v23_reduce3bigloads.raw"),
+            "--dyr", str(folder / "IEEE300_genrou_exdc1_tgov1_zone1ac.dyr"),
+            "--task-config",
+            str(folder / "IEEE300_RL_loadShedding_zone1_continuous_LSTM_multipfcases_training_"
+                         "gp.json"),
+            "--hidden", "8,8", "--directions", "2", "--top", "1", "--tasks-per-iteration", "2",
+            "--task-sampling", "stratified", "--episode", "0.3", "--checkpoint-every", "2",
             "--out", str(tmp_path)]
-    assert main("ieee300_fidvr", DEFAULTS_300, args) == 0
+    assert main(args + ["--iterations", "2"]) == 0
+    assert main(["--resume", "--iterations", "3", "--hidden", "8,8", "--directions", "2",
+                 "--top", "1", "--tasks-per-iteration", "2", "--task-sampling", "stratified",
+                 "--episode", "0.3", "--checkpoint-every", "2", "--out", str(tmp_path)]) == 0
     rows = [json.loads(line) for line in _lines(tmp_path / "metrics.jsonl")]
     assert [r["rollouts"] for r in rows] == [8, 16, 24]
     assert all(np.isfinite(r["reward_mean"]) for r in rows)
     saved = json.loads((tmp_path / "policy" / "policy.json").read_text())
-    assert saved["spec"]["kind"] == "lstm" and saved["case"] == "ieee300_fidvr"
+    assert saved["spec"]["kind"] == "lstm" and saved["study"] == \
+        "IEEE300_FIDVR_LoadShedding_Continuous_Action"
+    assert len(saved["layout"]["observed_buses"]) == 142 == saved["spec"]["obs_size"] - 34

@@ -14,21 +14,21 @@ import numpy as np
 import pytest
 
 from baselines.uvls import UvlsParams, check_params, uvls_policy
-from jaxgrid import cases
 from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
+from jaxgrid.study import builtin
 
 FRACTION_TOL = 1e-6  # float32 fractions of 0.2 after a subtraction or two
 
 
 @pytest.fixture(scope="module")
 def study():
-    return cases.load("ieee39_fidvr")
+    return builtin("ieee39_fidvr")
 
 
 @pytest.fixture(scope="module")
 def env(study):
-    return LoadSheddingEnv.for_study(study, episode=6.0)
+    return study.env(episode=6.0)
 
 
 @pytest.fixture(scope="module")
@@ -131,7 +131,7 @@ def test_remainder_beyond_the_load_left_is_dropped(env, relay):
 
 
 def test_relay_reads_the_newest_of_stacked_observations(study, env, relay):
-    stacked = LoadSheddingEnv(env.model, EnvConfig.for_study(study, episode=6.0, history=3))
+    stacked = study.env(episode=6.0, history=3)
     apply, params, carry = uvls_policy(stacked)
     vm = np.ones((10, 3))
     vm[:, 0] = 0.65
@@ -173,11 +173,13 @@ def test_out_of_range_settings_are_named(env, settings, message):
         uvls_policy(env, UvlsParams(**settings))
 
 
-def test_action_bus_must_be_observed(env):
+def test_action_bus_must_be_observed_and_its_load_fraction_too(study):
     config = EnvConfig(observed_buses=(4, 504, 7, 507), action_buses=(504, 507, 518))
-    blind = LoadSheddingEnv(env.model, config)
+    blind = LoadSheddingEnv(study.point(0), config)
     with pytest.raises(ValueError, match=r"action buses \[518\] are not among observed_buses"):
         uvls_policy(blind)
+    with pytest.raises(ValueError, match="include_action_status = true"):
+        uvls_policy(study.env(include_action_status=False))
 
 
 # --------------------------------------------------------------------------- #
@@ -185,18 +187,20 @@ def test_action_bus_must_be_observed(env):
 # --------------------------------------------------------------------------- #
 
 @pytest.fixture(scope="module")
-def episodes(env):
+def episodes(study, env):
     """UVLS and no control (fractions 0) on [no fault, bus-4 0.02 s, bus-4 0.08 s (FIDVR)]."""
+    grid = study.point(0)
     faults = [None, FaultEvent(4, 1.0, 0.02), FaultEvent(4, 1.0, 0.08)]
-    batch = stack_tasks([make_task(env.model, f) for f in faults])
+    batch = stack_tasks([make_task(grid, f) for f in faults])
     policy_apply, params, carry = uvls_policy(env)
     off = params.replace(fractions=np.zeros_like(params.fractions))
-    run = jax.jit(env.rollout, static_argnums=(0, 5))
-    return {name: jax.tree.map(np.asarray, run(policy_apply, p, batch, EnvParams(), carry, True))
+    run = jax.jit(env.rollout, static_argnums=(0, 6))
+    return {name: jax.tree.map(np.asarray, run(policy_apply, p, batch, EnvParams(), grid, carry,
+                                               True))
             for name, p in (("uvls", params), ("none", off))}
 
 
-def test_uvls_on_the_fidvr_task(episodes, env):
+def test_uvls_on_the_fidvr_task(episodes, study, env):
     uvls, none = episodes["uvls"], episodes["none"]
     print("\ntasks: [no fault, bus 4 0.02 s, bus 4 0.08 s]")
     for name, out in (("no control", none), ("UVLS", uvls)):
@@ -211,5 +215,5 @@ def test_uvls_on_the_fidvr_task(episodes, env):
     assert uvls["shed_pu"][0] == 0.0 and uvls["reward"][0] == pytest.approx(0.0, abs=1e-6), \
         "no fault: the voltages stay high and no relay trips"
     assert uvls["shed_pu"][2] > 0.0, "FIDVR: the relays shed load"
-    p0 = float(np.sum(np.asarray(env.model.load_p0)[env.action_slots]))
+    p0 = float(np.sum(np.asarray(study.point(0).load_p0)[env.action_slots]))
     assert np.all(uvls["shed_pu"] <= 0.6 * p0 * (1 + 1e-5)), "each stage sheds 20 % at most once"

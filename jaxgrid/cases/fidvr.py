@@ -2,7 +2,8 @@
 
 Each builder returns a `StudyCase`: a `Case`, its dynamic records (a `DyrData` built here, source
 "jaxgrid.cases.<name>", line = record index), the buses the load-shedding task observes and acts
-on, the motor buses, the integration step and the operating point. Everything is built by this
+on, the motor buses, the integration step, the operating point, the study's reward values and
+its train and test fault sets (`jaxgrid.study.builtin` makes a `Study` of them). Everything is built by this
 module from public data (MATPOWER networks as shipped by PYPOWER, textbook machine data, the
 ACMTBLU1 specification); the PNNL PARS study files were read for facts (bus numbers, which load
 carries a motor, typical parameter values), nothing is read from them.
@@ -75,8 +76,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from jaxgrid.case import SLACK, Case, build_case, to_rows
@@ -89,10 +88,6 @@ from jaxgrid.models.exciters import Ieeet1
 from jaxgrid.models.governors import Hygov, Tgov1
 from jaxgrid.models.machines import Genrou
 from jaxgrid.powerflow import bus_loads, solve
-
-if TYPE_CHECKING:
-    from jaxgrid.compile import CompileOptions
-    from jaxgrid.grid import GridModel
 
 # Allowed load_level per case (module docstring).
 LOAD_LEVEL_RANGE = {"ieee39_fidvr": (0.5, 1.4), "ieee300_fidvr": (0.5, 1.0)}
@@ -113,6 +108,24 @@ LOAD_BUS_OFFSET_300 = 20000
 LOAD_XFMR_X_OWN_BASE = 0.01  # p.u. on the load's MVA
 OBSERVED_ZONE_300 = 1
 OBSERVED_MIN_KV_300 = 60.0
+
+# The study's reward values (jaxgrid.env.EnvParams fields; PNNL task files
+# IEEE39_RL_loadShedding_3motor_continuous.json and the 300-bus LSTM training file, whose
+# recovery level 0.9 / 5 s is not used here: the built-in 300-bus case checks 0.95 at 4 s).
+REWARD_39 = dict(c_voltage=260.0, c_shed=150.0, c_invalid=3.0, c_prefault=100.0,
+                 unstable_penalty=1000.0, recovery_level=0.95, recovery_time=4.0,
+                 action_low=-0.2, action_high=0.0)
+REWARD_300 = dict(REWARD_39, c_voltage=30.0, unstable_penalty=10000.0)
+
+# Fault sets, (fault buses, durations in s), faults at 1.0 s. 39-bus: the PNNL training buses
+# and the paper's 120 test tasks. 300-bus: the training file's buses plus bus 26, and as test
+# buses those of the testing file plus bus 26 (34 zone-1 buses).
+ZONE1_TEST_BUSES_300 = (3, 5, 12, 2, 8, 15, 17, 23, 1, 4, 6, 7, 9, 10, 11, 13, 14, 16, 19, 20,
+                        21, 22, 25, 87, 102, 89, 125, 160, 320, 150, 123, 131, 130, 26)
+TASK_SETS_39 = {"train": ((4, 15, 21), (0.0, 0.05, 0.08)),
+                "test": (tuple(range(1, 31)), (0.02, 0.05, 0.08, 0.1))}
+TASK_SETS_300 = {"train": ((2, 3, 5, 8, 12, 15, 17, 23, 26), (0.0, 0.05, 0.08)),
+                 "test": (ZONE1_TEST_BUSES_300, (0.05, 0.06, 0.07, 0.08, 0.1))}
 
 # Pai (1989) New England machine data, p.u. on 100 MVA, by bus:
 #        H      Xl      Xd      X'd     T'do   Xq      X'q     T'qo
@@ -178,6 +191,8 @@ class StudyCase:
       dt: integration step of the study, s.
       load_level: factor on every load and generator dispatch (1 = the base case).
       description: one paragraph on how the case was built.
+      reward: the study's `jaxgrid.env.EnvParams` values by field name.
+      task_sets: {"train" | "test": (fault buses, fault durations in s)}, faults at 1.0 s.
     """
 
     name: str
@@ -189,13 +204,8 @@ class StudyCase:
     dt: float
     load_level: float
     description: str
-
-    def compile(self, options: CompileOptions | None = None) -> GridModel:
-        """`compile_model` of this case; default options make the action buses load slots."""
-        from jaxgrid.compile import CompileOptions, compile_model
-
-        return compile_model(self.case, self.dyr,
-                             options or CompileOptions(load_buses=self.action_buses))
+    reward: dict
+    task_sets: dict
 
 
 @register("ieee39_fidvr", "IEEE 39-bus FIDVR study: A/C motors at 504/507/518, GENROU + IEEET1 "
@@ -218,7 +228,8 @@ def ieee39_fidvr(load_level: float = 1.0) -> StudyCase:
     return StudyCase(
         name=case.name, case=case, dyr=_dyr("ieee39_fidvr", records),
         observed_buses=OBSERVED_BUSES_39, action_buses=ACTION_BUSES_39,
-        motor_buses=MOTOR_BUSES_39, dt=0.002, load_level=level,
+        motor_buses=MOTOR_BUSES_39, dt=0.002, load_level=level, reward=REWARD_39,
+        task_sets=TASK_SETS_39,
         description=("IEEE 39-bus (MATPOWER case39) with the PNNL study's load buses 504/507/508/"
                      "518 behind transformers, ACMTBLU1 A/C motors on 40 % of the load at 504, "
                      "507 and 518, Pai's machine data as GENROU, IEEET1 exciters, TGOV1 "
@@ -246,7 +257,7 @@ def ieee300_fidvr(load_level: float = 1.0) -> StudyCase:
     return StudyCase(
         name=case.name, case=case, dyr=_dyr("ieee300_fidvr", records),
         observed_buses=observed, action_buses=motor_buses, motor_buses=motor_buses, dt=0.005,
-        load_level=level,
+        load_level=level, reward=REWARD_300, task_sets=TASK_SETS_300,
         description=("IEEE 300-bus (MATPOWER case300) with the loads of the 34 zone-1 motor buses "
                      "behind transformers on buses 200xx, ACMTBLU1 A/C motors on 40 % of each, "
                      "Kundur's typical machine as GENROU on every unit, IEEET1 exciters, TGOV1 "

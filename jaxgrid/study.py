@@ -1,0 +1,648 @@
+"""A load-shedding study as one value: operating points, buses, reward, steps and task sets.
+
+    study = load_study("ieee39_fidvr")                  # built-in, load levels as points
+    study = load_study("studies/ieee39_pnnl.toml")      # the project's study file
+    study = from_files(["a.raw", "b.raw"], "x.dyr", "task.json", "sim.json")
+    env, grid = study.env(), study.point(0)
+    write_study(study, "run/study.toml")                # a run folder alone reproduces it
+
+A `Study` holds its `StudyDefinition` (everything that rebuilds it, serialisable to TOML),
+the operating points (solved cases of one grid) and their compiled models stacked into
+one `GridModel` pytree with a leading operating-point axis (`models`). That pytree is data:
+it is passed to compiled functions as an argument (`at_point` selects a point inside jit),
+so one compilation serves every operating point of the grid.
+
+Built three ways:
+  built-in: `jaxgrid.cases` FIDVR study cases ("ieee39_fidvr", "ieee300_fidvr") at one or
+    more load levels; buses, step, reward values and task sets are the case's.
+  from files: RAW files (the operating points; one grid, so bus, branch, load and machine
+    structure must agree), one DYR, optionally a PNNL task JSON (buses, reward, history,
+    training faults: `jaxgrid.io.pnnl`) and a PNNL simulation JSON (step, episode length).
+  study file (TOML, `read_study`): names the built-in or the files (paths relative to the
+    file, RAW paths may be glob patterns) and overrides any field of the definition:
+
+        name = "ieee39_pnnl"
+        [grid]      builtin, load_levels | raw, dyr, task_config, sim_config
+        [compile]   strict, precision, sweeps, [compile.motors], [compile.loads]
+        [env]       jaxgrid.env.EnvConfig fields (observed_buses, action_buses, dt, agent_dt,
+                    episode, history, include_action_status, recovery_buses, [env.bounds])
+        [params]    jaxgrid.env.EnvParams fields (reward weights, action range, recovery)
+        [tasks.NAME] jaxgrid.tasks.TaskSet fields (fault_buses, fault_durations,
+                    fault_starts, operating_points, fault_r, fault_x)
+
+`write_study` writes the resolved definition, every field explicit and paths absolute;
+reading it back gives the identical definition.
+"""
+from __future__ import annotations
+
+import dataclasses
+import glob
+import re
+import tomllib
+import warnings
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import tomli_w
+
+from jaxgrid import cases
+from jaxgrid.case import Case
+from jaxgrid.compile import CompileOptions, compile_model
+from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.grid import GridModel
+from jaxgrid.io import pnnl
+from jaxgrid.io.dyr import read_dyr
+from jaxgrid.io.raw import read_raw
+from jaxgrid.models.acmotor import MotorOptions
+from jaxgrid.models.loads import LoadSplit
+from jaxgrid.powerflow import bus_loads
+from jaxgrid.simulate import Bounds
+from jaxgrid.tasks import PointTask, TaskSet, TaskSpec, task_batch
+
+
+class StudyWarning(UserWarning):
+    """A study input that is read but changes nothing, or a check that does not match."""
+
+
+@dataclasses.dataclass(frozen=True)
+class GridSource:
+    """Where the operating points come from: a built-in case or files (absolute paths).
+
+    Attributes:
+      builtin: a `jaxgrid.cases` FIDVR study case name, or None.
+      load_levels: the built-in's operating points (factor on loads and dispatch).
+      raw: RAW files, one per operating point.  dyr: the DYR file.
+      task_config, sim_config: PNNL task and simulation JSON files, or None.
+    """
+
+    builtin: str | None = None
+    load_levels: tuple[float, ...] = (1.0,)
+    raw: tuple[str, ...] = ()
+    dyr: str | None = None
+    task_config: str | None = None
+    sim_config: str | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class CompileSettings:
+    """How every operating point is compiled (`jaxgrid.compile.CompileOptions`; the action
+    buses become the load slots)."""
+
+    strict: bool = True
+    precision: str = "float32"
+    sweeps: int = 2
+    motors: MotorOptions = MotorOptions()
+    loads: LoadSplit = LoadSplit()
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyDefinition:
+    """Everything that rebuilds a study (what `write_study` saves).
+
+    Attributes:
+      name: the study's name.  grid: its sources.  compile: compile settings.
+      env: the environment's structure.  params: reward and action values.
+      tasks: named task sets ("train", "test", ...).
+    """
+
+    name: str
+    grid: GridSource
+    compile: CompileSettings
+    env: EnvConfig
+    params: EnvParams
+    tasks: dict
+
+
+@dataclasses.dataclass(frozen=True)
+class OperatingPoint:
+    """One solved case of the study's grid.
+
+    Attributes:
+      label: short name ("load100", a RAW file's stem).  source: where it came from.
+      case: the network.  notes: what the compiler reported for it (load report, ...).
+    """
+
+    label: str
+    source: str
+    case: Case
+    notes: tuple[str, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    """A load-shedding study (module docstring).
+
+    Attributes:
+      definition: what rebuilds it.  points: the operating points.
+      models: the compiled points stacked, every array leaf with a leading (n_points,) axis.
+      notes: what the readers and checks reported (unused keys, count mismatches, ...).
+    """
+
+    definition: StudyDefinition
+    points: tuple[OperatingPoint, ...]
+    models: GridModel
+    notes: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        return self.definition.name
+
+    @property
+    def config(self) -> EnvConfig:
+        return self.definition.env
+
+    @property
+    def params(self) -> EnvParams:
+        return self.definition.params
+
+    @property
+    def n_points(self) -> int:
+        return len(self.points)
+
+    @property
+    def base_mva(self) -> float:
+        return self.points[0].case.base_mva
+
+    def point(self, index: int) -> GridModel:
+        """The compiled model of operating point `index` (host arrays)."""
+        return jax.tree.map(lambda a: a[index], self.models)
+
+    def env(self, **config) -> LoadSheddingEnv:
+        """The environment; `config` overrides EnvConfig fields, e.g. episode=6.0 (s)."""
+        return LoadSheddingEnv(self.point(0), dataclasses.replace(self.config, **config))
+
+    def task_set(self, name: str) -> TaskSet:
+        """The named task set; ValueError listing the study's sets."""
+        if name not in self.definition.tasks:
+            raise ValueError(f"study {self.name!r} has no task set {name!r}; it has "
+                             f"{', '.join(sorted(self.definition.tasks)) or 'none'}")
+        return self.definition.tasks[name]
+
+    def tasks(self, name: str) -> list[TaskSpec]:
+        """The specs of the named task set (every operating point × fault × duration)."""
+        return self.task_set(name).specs(self.n_points)
+
+    def batch(self, specs) -> PointTask:
+        """Stacked PointTask of specs (any operating points of this study)."""
+        return task_batch(self.point(0), specs)
+
+
+def at_point(models: GridModel, point) -> GridModel:
+    """The model of operating point `point` (traced int) from stacked `models`, inside jit.
+
+    With one operating point the index is static, so nothing is gathered.
+    """
+    if jax.tree.leaves(models)[0].shape[0] == 1:
+        return jax.tree.map(lambda a: a[0], models)
+    return jax.tree.map(lambda a: a[point], models)
+
+
+def point_episode(env: LoadSheddingEnv, params: EnvParams):
+    """episode(policy_apply, policy_params, task: PointTask, policy_carry, models) -> dict:
+    `env.episode` at the task's operating point of stacked `models` (for `ars.pars`)."""
+
+    def episode(policy_apply, policy_params, task: PointTask, policy_carry, models):
+        return env.episode(policy_apply, policy_params, task.task, params,
+                           at_point(models, task.point), policy_carry)
+
+    return episode
+
+
+def rollout_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
+                  policy_carry=None, trace: bool = False):
+    """Every task of `specs` in one compiled call: a vmap over their operating points (models
+    batched) of `env.rollout` over each point's tasks (one model shared).
+
+    Every operating point of `specs` must have the same number of tasks (task sets do).
+    Returns (specs in the order of the results, `env.rollout`'s dict with a leading axis).
+    """
+    points = sorted({s.operating_point for s in specs})
+    groups = [[s for s in specs if s.operating_point == p] for p in points]
+    if len({len(g) for g in groups}) != 1:
+        raise ValueError("rollout_specs: every operating point needs the same number of tasks")
+    ordered = [s for g in groups for s in g]
+    shape = (len(points), len(groups[0]))
+    tasks = jax.tree.map(lambda a: a.reshape(shape + a.shape[1:]), study.batch(ordered).task)
+    models = jax.tree.map(lambda a: a[np.array(points)], study.models)
+
+    def run(models, tasks, policy_params, policy_carry):
+        return jax.vmap(lambda grid, task: env.rollout(
+            policy_apply, policy_params, task, study.params, grid, policy_carry, trace))(
+                models, tasks)
+
+    with jax.enable_x64(env.precision == "float64"):
+        out = jax.jit(run)(models, tasks, policy_params, policy_carry)
+    out = jax.tree.map(lambda a: np.asarray(a).reshape((len(ordered),) + a.shape[2:]), out)
+    return ordered, out
+
+
+def stratified_sampler(task_set: TaskSet, n_points: int, m: int):
+    """sample(key) -> (m,) indices into `task_set.specs(n_points)`: as the PARS study, k_b
+    distinct fault buses × k_d distinct durations (k_b·k_d = m, k_d as large as the set
+    allows), each pair at a uniformly drawn operating point and start."""
+    n_p, n_s = len(task_set.points(n_points)), len(task_set.fault_starts)
+    n_b, n_d = len(task_set.fault_buses), len(task_set.fault_durations)
+    k_d = next((k for k in range(min(n_d, m), 0, -1) if m % k == 0 and m // k <= n_b), None)
+    if k_d is None:
+        raise ValueError(f"stratified sampling: m = {m} tasks are not k fault buses × k' "
+                         f"durations of this set ({n_b} buses, {n_d} durations)")
+    k_b = m // k_d
+
+    def sample(key):
+        k_bus, k_dur, k_point, k_start = jax.random.split(key, 4)
+        bus = jax.random.choice(k_bus, n_b, (k_b,), replace=False)
+        duration = jax.random.choice(k_dur, n_d, (k_d,), replace=False)
+        bus, duration = (a.reshape(-1) for a in jnp.meshgrid(bus, duration, indexing="ij"))
+        point = jax.random.randint(k_point, (m,), 0, n_p)
+        start = jax.random.randint(k_start, (m,), 0, n_s)
+        return ((point * n_s + start) * n_b + bus) * n_d + duration
+
+    return sample
+
+
+# --------------------------------------------------------------------------- #
+# Building
+# --------------------------------------------------------------------------- #
+
+def load_study(spec: str) -> Study:
+    """A built-in study by name, or a study TOML file."""
+    if spec in cases.names():
+        return builtin(spec)
+    if spec.endswith(".toml") or Path(spec).is_file():
+        return read_study(spec)
+    studies = [n for n in cases.names() if n.endswith("_fidvr")]
+    raise ValueError(f"study {spec!r}: neither a built-in study ({', '.join(studies)}) nor a "
+                     "study file (.toml)")
+
+
+def builtin(case: str, load_levels=(1.0,), **overrides) -> Study:
+    """The built-in FIDVR study `case` at `load_levels` (operating points); `overrides` as
+    `build` (name, compile, env, params, tasks)."""
+    return build(GridSource(builtin=case, load_levels=tuple(float(x) for x in load_levels)),
+                 **overrides)
+
+
+def from_files(raw, dyr, task_config=None, sim_config=None, **overrides) -> Study:
+    """A study from RAW files (operating points), a DYR and PNNL JSON files."""
+    raw = [raw] if isinstance(raw, (str, Path)) else list(raw)
+    return build(GridSource(raw=tuple(str(Path(r).absolute()) for r in raw),
+                            dyr=str(Path(dyr).absolute()),
+                            task_config=task_config and str(Path(task_config).absolute()),
+                            sim_config=sim_config and str(Path(sim_config).absolute())),
+                 **overrides)
+
+
+def build(grid: GridSource, name: str | None = None,
+          compile: CompileSettings = CompileSettings(), env: dict | None = None,
+          params: dict | None = None, tasks: dict | None = None) -> Study:
+    """The study of `grid` with overrides of the source's env, params and task sets.
+
+    env, params: {field: value}; tasks: {set name: {TaskSet field: value}} (a new name adds
+    a set, fault buses and durations then required).
+    """
+    notes: list[str] = []
+    if grid.builtin:
+        points, dyr, defaults = _builtin_points(grid)
+    elif grid.raw:
+        points, dyr, defaults = _file_points(grid, notes)
+    else:
+        raise ValueError("a study needs [grid] builtin = NAME, or raw = [files] and dyr = FILE")
+    env_values = {**defaults["env"], **(env or {})}
+    for key in ("observed_buses", "action_buses"):
+        if key not in env_values:
+            raise ValueError(f"study: no {key}: give a task_config or [env] {key}")
+    case = points[0][2]
+    env_values["action_buses"] = tuple(env_values["action_buses"])
+    options = CompileOptions(strict=compile.strict, loads=compile.loads,
+                             load_buses=env_values["action_buses"], motors=compile.motors,
+                             precision=compile.precision, sweeps=compile.sweeps)
+    models = [compile_model(c, dyr, options) for _, _, c in points]
+    stacked = stack_models(models, [source for _, source, _ in points])
+    config = EnvConfig(**env_values)
+    for key in ("observed_buses", "recovery_buses"):
+        _check_buses(getattr(config, key) or (), models[0], f"env.{key}")
+    task_sets = {}
+    for set_name in sorted(set(defaults["tasks"]) | set(tasks or {})):
+        values = {**defaults["tasks"].get(set_name, {}), **(tasks or {}).get(set_name, {})}
+        missing = {"fault_buses", "fault_durations"} - set(values)
+        if missing:
+            raise ValueError(f"study: tasks.{set_name} needs {sorted(missing)}")
+        task_sets[set_name] = TaskSet(**values)
+        _check_buses(task_sets[set_name].fault_buses, models[0], f"tasks.{set_name}.fault_buses")
+        task_sets[set_name].points(len(points))
+    definition = StudyDefinition(
+        name=name or defaults["name"], grid=grid, compile=compile, env=config,
+        params=EnvParams(**{**defaults["params"], **(params or {})}), tasks=task_sets)
+    if defaults.get("pnnl_task"):
+        notes.extend(_pnnl_checks(defaults["pnnl_task"], config, case, models[0]))
+    if notes:
+        warnings.warn(f"study {definition.name!r}: {len(notes)} note(s), in Study.notes: "
+                      + "; ".join(notes), StudyWarning, stacklevel=2)
+    ops = tuple(OperatingPoint(label, source, c, m.notes)
+                for (label, source, c), m in zip(points, models))
+    return Study(definition=definition, points=ops, models=stacked, notes=tuple(notes))
+
+
+def _builtin_points(grid: GridSource):
+    made = [cases.load(grid.builtin, load_level=level) for level in grid.load_levels]
+    first = made[0]
+    if not hasattr(first, "task_sets"):
+        raise ValueError(f"built-in {grid.builtin!r} is a network without dynamic data; "
+                         "study cases: " + ", ".join(n for n in cases.names()
+                                                     if n.endswith("_fidvr")))
+    points = [(f"load{100 * s.load_level:g}", f"jaxgrid.cases.{grid.builtin}"
+               f"(load_level={s.load_level:g})", s.case) for s in made]
+    defaults = {
+        "name": grid.builtin,
+        "env": {"observed_buses": first.observed_buses, "action_buses": first.action_buses,
+                "dt": first.dt},
+        "params": dict(first.reward),
+        "tasks": {k: {"fault_buses": tuple(b), "fault_durations": tuple(d)}
+                  for k, (b, d) in first.task_sets.items()}}
+    # machine data and MBASE are those of level 1 at every level: one DYR serves all points
+    return points, first.dyr, defaults
+
+
+def _file_points(grid: GridSource, notes: list[str]):
+    if not grid.dyr:
+        raise ValueError("study: [grid] raw needs dyr = FILE")
+    points, stems = [], {}
+    for path in grid.raw:
+        stem = Path(path).stem
+        stems[stem] = stems.get(stem, 0) + 1
+        label = stem if stems[stem] == 1 else f"{stem}#{stems[stem]}"
+        points.append((label, path, read_raw(path)))
+    _, first_path, first = points[0]
+    for _, path, case in points[1:]:
+        difference = structure_difference(first, case)
+        if difference:
+            raise ValueError(f"{path} and {first_path} are not one grid: {difference}")
+    defaults = {"name": Path(grid.task_config or grid.raw[0]).stem, "env": {}, "params": {},
+                "tasks": {}}
+    case = points[0][2]
+    if grid.task_config:
+        task = pnnl.read_task_config(grid.task_config)
+        notes.extend(f"{task.source}: {n}" for n in task.notes)
+        notes.extend(f"{task.source}: key {k!r} is not understood and was not used"
+                     for k in task.unknown)
+        action = _scope(task.action_scope, task.action, case, task.source, "actionScopeAry")
+        observed = _scope(task.observation_scope, task.observed, case, task.source,
+                          "observationScopeAry", min_kv=task.observed_min_kv)
+        if task.observation_scope == "Zone":
+            observed = observed + tuple(b for b in action if b not in observed)
+        fault_buses = tuple(bus_number(n, case, task.source, "faultBusCandidates")
+                            for n in task.fault_buses)
+        defaults.update(name=task.name, params=dict(task.params), pnnl_task=task, env={
+            "observed_buses": observed, "action_buses": action, "agent_dt": task.agent_dt,
+            "history": task.history, "include_action_status": task.include_action_status},
+            tasks={"train": {"fault_buses": fault_buses, "fault_starts": task.fault_starts,
+                             "fault_durations": task.fault_durations}})
+    if grid.sim_config:
+        sim = pnnl.read_sim_config(grid.sim_config)
+        notes.extend(f"{sim.source}: {n}" for n in sim.notes)
+        notes.extend(f"{sim.source}: key {k!r} is not understood and was not used"
+                     for k in sim.unknown)
+        defaults["env"].update(dt=sim.dt, episode=sim.t_end)
+        if sim.fault_r is not None and "train" in defaults["tasks"]:
+            defaults["tasks"]["train"].update(fault_r=sim.fault_r, fault_x=sim.fault_x)
+    return points, read_dyr(grid.dyr), defaults
+
+
+_BUS_NAME = re.compile(r"bus(\d+)", re.IGNORECASE)
+
+
+def bus_number(name, case: Case, source: str, key: str) -> int:
+    """The RAW number of a PNNL bus reference ("Bus504", "bus20001", 504)."""
+    match = _BUS_NAME.fullmatch(str(name).strip()) or re.fullmatch(r"(\d+)", str(name).strip())
+    if not match:
+        raise ValueError(f"{source}: {key}: {name!r} is not a bus reference ('Bus<number>')")
+    number = int(match.group(1))
+    if number not in set(int(n) for n in case.buses.number):
+        raise ValueError(f"{source}: {key}: {name!r}: the case {case.source} has no bus "
+                         f"{number}")
+    return number
+
+
+def _scope(kind: str, entries, case: Case, source: str, key: str, min_kv: float = 0.0):
+    """Bus numbers of a "Bus" scope (the names) or a "Zone" scope (observations: the zones'
+    buses above min_kv; actions: the zones' buses with an in-service load)."""
+    if kind == "Bus":
+        return tuple(bus_number(n, case, source, key) for n in entries)
+    zones = []
+    for z in entries:
+        if not str(z).strip().isdigit() or int(z) not in set(int(v) for v in case.buses.zone):
+            raise ValueError(f"{source}: {key}: zone {z!r} is not a zone of {case.source}")
+        zones.append(int(z))
+    in_zone = np.isin(case.buses.zone, zones)
+    if key == "actionScopeAry":
+        chosen = in_zone & (np.abs(sum(bus_loads(case))) > 0)
+    else:
+        chosen = in_zone & (case.buses.base_kv > min_kv)
+    return tuple(int(b) for b in case.buses.number[chosen])
+
+
+def _check_buses(buses, model: GridModel, key: str) -> None:
+    missing = [b for b in buses if b not in model.bus_numbers]
+    if missing:
+        raise ValueError(f"study: {key}: buses {missing} are not in the case")
+
+
+def _pnnl_checks(task: pnnl.PnnlTask, config: EnvConfig, case: Case, model: GridModel):
+    """Notes where the resolved buses or loads differ from the file's own counts."""
+    notes = []
+    zones = {int(z) for z in task.observed} if task.observation_scope == "Zone" else None
+    if zones is not None:
+        zone_of = dict(zip((int(b) for b in case.buses.number), case.buses.zone))
+        kv_of = dict(zip((int(b) for b in case.buses.number), case.buses.base_kv))
+        inside = [b for b in config.observed_buses if zone_of[b] in zones]
+        found = {"ObservationSelfZoneVoltNum": len(inside),
+                 "ObservationSelfZoneLowVoltNum": sum(kv_of[b] <= task.observed_min_kv
+                                                      for b in inside),
+                 "ObservationOtherZoneVoltNum": len(config.observed_buses) - len(inside),
+                 "actionLoadSelfZoneNum": sum(zone_of[b] in zones for b in config.action_buses),
+                 "actionLoadOtherZoneNum": sum(zone_of[b] not in zones
+                                               for b in config.action_buses)}
+        notes += [f"{task.source}: {k} = {v}, but the case gives {found[k]}"
+                  for k, v in task.counts.items() if found[k] != v]
+    if task.action_p_mw is not None:
+        slots = [model.load_slot(b) for b in config.action_buses]
+        mw = np.asarray(model.load_p0)[slots] * case.base_mva
+        notes += [f"{task.source}: actionBusesPValue: bus {b} {want:g} MW, the case has "
+                  f"{have:.2f} MW" for b, want, have in zip(config.action_buses,
+                                                             task.action_p_mw, mw)
+                  if abs(have - want) > 0.01 * abs(want)]
+    return notes
+
+
+def structure_difference(a: Case, b: Case) -> str | None:
+    """The first difference in bus, branch, load or machine structure of two cases, or None."""
+    tables = (
+        ("buses", lambda c: [int(n) for n in c.buses.number]),
+        ("branches (from, to, circuit)", lambda c: list(zip(
+            c.buses.number[c.branches.from_bus].tolist(), c.buses.number[c.branches.to_bus]
+            .tolist(), c.branches.ckt))),
+        ("branch status", lambda c: c.branches.in_service.tolist()),
+        ("loads (bus, id, status)", lambda c: list(zip(
+            c.buses.number[c.loads.bus].tolist(), c.loads.load_id,
+            c.loads.in_service.tolist()))),
+        ("machines (bus, id, status)", lambda c: list(zip(
+            c.buses.number[c.generators.bus].tolist(), c.generators.gen_id,
+            c.generators.in_service.tolist()))),
+    )
+    for what, rows in tables:
+        left, right = rows(a), rows(b)
+        if left != right:
+            if len(left) != len(right):
+                return f"{what}: {len(left)} against {len(right)}"
+            k = next(i for i, (x, y) in enumerate(zip(left, right)) if x != y)
+            return f"{what}: entry {k + 1} is {left[k]} against {right[k]}"
+    return None
+
+
+def stack_models(models: list[GridModel], sources: list[str]) -> GridModel:
+    """One GridModel whose array leaves gain a leading operating-point axis.
+
+    The compiler's notes stay with each point; everything static must agree (one grid).
+    """
+    plain = [dataclasses.replace(m, notes=()) for m in models]
+    first = jax.tree.structure(plain[0])
+    for model, source in zip(plain[1:], sources[1:]):
+        if jax.tree.structure(model) != first:
+            raise ValueError(f"{source} and {sources[0]} compile to different structures "
+                             "(device models, units or load slots differ)")
+    return jax.tree.map(lambda *a: np.stack(a), *plain)
+
+
+# --------------------------------------------------------------------------- #
+# Study files
+# --------------------------------------------------------------------------- #
+
+_SECTIONS = {"name", "grid", "compile", "env", "params", "tasks"}
+
+
+def read_study(path: str | Path) -> Study:
+    """A study from its TOML file (module docstring); errors name the file, key and value."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise ValueError(f"{path}: cannot read a study file: {err}") from None
+    unknown = sorted(set(data) - _SECTIONS)
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {unknown}; allowed: {sorted(_SECTIONS)}")
+    base = path.parent
+    grid = dict(_table(data.get("grid", {}), path, "grid"))
+    for key in ("dyr", "task_config", "sim_config"):
+        if key in grid:
+            grid[key] = str(_path(base, grid[key], path, f"grid.{key}"))
+    if "raw" in grid:
+        raws = [grid["raw"]] if isinstance(grid["raw"], str) else grid["raw"]
+        grid["raw"] = [str(p) for r in raws for p in _paths(base, r, path)]
+    source = _typed(GridSource, grid, path, "grid")
+    compile_settings = _typed(CompileSettings, data.get("compile", {}), path, "compile")
+    env = _fields(EnvConfig, data.get("env", {}), path, "env")
+    params = _fields(EnvParams, data.get("params", {}), path, "params")
+    tasks = {name: _fields(TaskSet, values, path, f"tasks.{name}")
+             for name, values in _table(data.get("tasks", {}), path, "tasks").items()}
+    name = data.get("name")
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"{path}: name = {name!r}: must be a string")
+    return build(source, name=name, compile=compile_settings, env=env, params=params,
+                 tasks=tasks)
+
+
+def write_study(study: Study | StudyDefinition, path: str | Path) -> None:
+    """Write the resolved definition as TOML (every field explicit, paths absolute)."""
+    definition = study.definition if isinstance(study, Study) else study
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(tomli_w.dumps(_plain(definition)))
+
+
+def _plain(value):
+    """Dataclasses and tuples as TOML-able dicts and lists; None fields left out."""
+    if dataclasses.is_dataclass(value):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)
+                if getattr(value, f.name) is not None}
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (tuple, list)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _table(value, path, key) -> dict:
+    if not isinstance(value, dict):
+        raise ValueError(f"{path}: {key} = {value!r}: must be a table")
+    return value
+
+
+_NESTED = {"MotorOptions": MotorOptions, "LoadSplit": LoadSplit, "Bounds": Bounds}
+
+
+def _fields(cls, values, path, key) -> dict:
+    """{field: value} checked against the fields of dataclass `cls` and their types."""
+    values = _table(values, path, key)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        raise ValueError(f"{path}: [{key}] unknown keys {unknown}; allowed: {sorted(fields)}")
+    return {name: _coerce(v, fields[name].type, path, f"{key}.{name}")
+            for name, v in values.items()}
+
+
+def _typed(cls, values, path, key):
+    return cls(**_fields(cls, values, path, key))
+
+
+def _coerce(value, annotation: str, path, key):
+    """value as the annotated type (str annotations: float, int, bool, str, tuple[X, ...],
+    the nested option dataclasses, and `X | None`)."""
+    base = annotation.removesuffix(" | None")
+    kind = re.sub(r"tuple\[(\w+), \.\.\.\]", r"a list of \1", base)
+    bad = ValueError(f"{path}: {key} = {value!r}: must be {kind}")
+    if base in _NESTED:
+        return _typed(_NESTED[base], value, path, key)
+    if base.startswith("tuple["):
+        if not isinstance(value, list):
+            raise bad
+        item = base[len("tuple["):].split(",")[0]
+        return tuple(_coerce(v, item, path, key) for v in value)
+    if base == "bool":
+        if not isinstance(value, bool):
+            raise bad
+        return value
+    if base in ("int", "float"):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+                base == "int" and not isinstance(value, int)):
+            raise bad
+        return float(value) if base == "float" else value
+    if base == "str":
+        if not isinstance(value, str):
+            raise bad
+        return value
+    raise ValueError(f"{path}: {key}: no reader for type {annotation}")
+
+
+def _path(base: Path, value, path, key) -> Path:
+    if not isinstance(value, str):
+        raise ValueError(f"{path}: {key} = {value!r}: must be a path")
+    out = (base / value).resolve()
+    if not out.is_file():
+        raise ValueError(f"{path}: {key} = {value!r}: no such file ({out})")
+    return out
+
+
+def _paths(base: Path, pattern, path) -> list[Path]:
+    """RAW files of one entry of grid.raw: a path or a glob pattern (sorted)."""
+    if not isinstance(pattern, str):
+        raise ValueError(f"{path}: grid.raw entry {pattern!r}: must be a path or pattern")
+    if not glob.has_magic(pattern):
+        return [_path(base, pattern, path, "grid.raw")]
+    found = sorted(Path(p).resolve() for p in glob.glob(str(base / pattern)))
+    if not found:
+        raise ValueError(f"{path}: grid.raw pattern {pattern!r} matches no file")
+    return found

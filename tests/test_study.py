@@ -1,0 +1,243 @@
+"""Studies as data: built from files or built-ins, saved and read back, operating points as
+data of one compiled program, and bad input named.
+
+The PNNL 39-bus study is read from its own files (base case and two baseCases load levels as
+operating points, strict mode with its ACMTBLU1 loads) once for the module, with 3 s
+episodes (the fault at 1 s, no recovery judgement needed for these checks).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from experiments.evaluate import no_control
+from jaxgrid.env import EnvParams
+from jaxgrid.io.raw import read_raw
+from jaxgrid.study import (CompileSettings, at_point, builtin, from_files, read_study,
+                           rollout_specs, stratified_sampler, write_study)
+from jaxgrid.tasks import TaskSet, TaskSpec
+
+BASE = "ieee39/IEEE39bus_multiloads_xfmr4_smallX_v30.raw"
+POINTS = [BASE, "ieee39/baseCases/IEEE39bus_multiloads_xfmr4_smallX_v30_4load_perc90.raw",
+          "ieee39/baseCases/IEEE39bus_multiloads_xfmr4_smallX_v30_4load_perc110.raw"]
+DYR = "ieee39/IEEE39bus_3AC.dyr"
+TASK = "ieee39/IEEE39_RL_loadShedding_3motor_continuous.json"
+SIM = "ieee39/IEEE39_dyn_config.json"
+EPISODE = 3.0  # s
+# Per-point runs against one multi-point batch: the same float32 arithmetic per rollout,
+# vmapped in another layout (XLA may block the network products differently).
+BATCH_RTOL = 1e-4
+
+
+@pytest.fixture(scope="module")
+def pnnl39(shared_cases):
+    return from_files([shared_cases / p for p in POINTS], shared_cases / DYR,
+                      shared_cases / TASK, shared_cases / SIM, env={"episode": EPISODE})
+
+
+def test_pnnl_39_bus_study_from_its_files(pnnl39, shared_cases):
+    study = pnnl39
+    assert study.name == "IEEE39_FIDVR_LoadShedding_Continuous_Action"
+    assert [p.label for p in study.points] == [(shared_cases / p).stem for p in POINTS]
+    config = study.config
+    assert config.observed_buses == (4, 504, 7, 507, 8, 508, 18, 518)
+    assert config.action_buses == (504, 507, 518)
+    assert (config.dt, config.agent_dt, config.history) == (0.002, 0.1, 10), \
+        "step from the simulation JSON, control step and history from the task JSON"
+    assert study.params == EnvParams(action_low=-1.0), "the 39-bus values, range [-1, 0]"
+    assert study.task_set("train") == TaskSet((4,), (0.0, 0.05, 0.08), (0.05,))
+    assert len(study.tasks("train")) == 9, "1 bus x 3 durations x 3 operating points"
+    assert jax.tree.leaves(study.models)[0].shape[0] == 3
+    assert any("actionLevels" in note for note in study.notes)
+    # the stacked models carry each point's own loads: at the action buses, the load each
+    # RAW file gives (MW), not the base case's
+    env = study.env()
+    for k, path in enumerate(POINTS):
+        case = read_raw(shared_cases / path)
+        mw = [sum(p for b, p, on in zip(case.buses.number[case.loads.bus],
+                                        case.loads.p_power, case.loads.in_service)
+                  if b == bus and on) * case.base_mva for bus in config.action_buses]
+        have = np.asarray(study.models.load_p0)[k, env.action_slots] * study.base_mva
+        assert have == pytest.approx(mw, rel=1e-6), path  # float32 model arrays
+
+
+@pytest.fixture(scope="module")
+def uncontrolled(pnnl39):
+    """Every task of a 3-point set in one call, and the same tasks point by point through one
+    jitted rollout that takes the grid model as an argument."""
+    study = pnnl39
+    env = study.env()
+    apply, params, carry = no_control(env)
+    specs = TaskSet((4, 15), (0.05, 0.08)).specs(study.n_points)
+    ordered, batch = rollout_specs(study, env, apply, params, specs, carry)
+    run = jax.jit(env.rollout, static_argnums=0)
+    per_point = []
+    for k in range(study.n_points):
+        mine = [s for s in ordered if s.operating_point == k]
+        per_point.append(run(apply, params, study.batch(mine).task, study.params,
+                             study.point(k), carry))
+    return ordered, batch, per_point, run
+
+
+def test_multi_point_batch_equals_per_point_runs(uncontrolled):
+    ordered, batch, per_point, _ = uncontrolled
+    assert [s.operating_point for s in ordered] == [0] * 4 + [1] * 4 + [2] * 4
+    for k, out in enumerate(per_point):
+        for key in ("reward", "steps", "recovered"):
+            np.testing.assert_allclose(np.asarray(out[key]), batch[key][4 * k:4 * k + 4],
+                                       rtol=BATCH_RTOL, err_msg=key)
+    rewards = batch["reward"].reshape(3, 4)
+    assert np.ptp(rewards, axis=0).max() > 1.0, "the operating points differ"
+
+
+def test_three_operating_points_one_compilation(uncontrolled):
+    *_, run = uncontrolled
+    assert run._cache_size() == 1, "one compiled rollout serves every operating point"
+
+
+def test_pars_iteration_compiles_once_across_points_and_task_sets(pnnl39):
+    from ars.pars import ParsConfig, init_state
+    from experiments.train import build
+
+    config = ParsConfig(directions=1, top=1, tasks_per_iteration=2)
+    trainer = build(pnnl39, "linear", (), config, history=1, episode=0.5)
+    state = init_state(trainer.policy, config)
+    for point in range(pnnl39.n_points):
+        tasks = pnnl39.batch([TaskSpec(4, 0.05, 1.0, point), TaskSpec(15, 0.08, 1.0, point)])
+        state, metrics = trainer.iteration(state, tasks, trainer.data)
+        assert np.isfinite(float(metrics["reward_mean"]))
+    state, _ = trainer.iteration(state, trainer.tasks, trainer.data)  # the 9 training tasks
+    assert trainer.iteration.compiled._cache_size() == 2, \
+        "one compilation per task-array shape (2 tasks, 9 tasks), none per operating point"
+
+
+def test_at_point_selects_inside_jit(pnnl39):
+    pick = jax.jit(lambda models, k: at_point(models, k).load_p0)
+    for k in range(3):
+        np.testing.assert_array_equal(np.asarray(pick(pnnl39.models, k)),
+                                      np.asarray(pnnl39.point(k).load_p0))
+    assert pick._cache_size() == 1
+
+
+def test_study_file_round_trip_gives_the_identical_definition(pnnl39, tmp_path):
+    path = tmp_path / "study.toml"
+    write_study(pnnl39, path)
+    again = read_study(path)
+    assert again.definition == pnnl39.definition
+    for a, b in zip(jax.tree.leaves(again.models), jax.tree.leaves(pnnl39.models)):
+        np.testing.assert_array_equal(a, b)
+    study = builtin("ieee39_fidvr", (0.9, 1.0), name="mine", params={"c_shed": 50.0},
+                    env={"history": 3, "recovery_buses": (4, 504)},
+                    tasks={"test": {"fault_buses": (4, 5), "operating_points": (1,)},
+                           "extra": {"fault_buses": (16,), "fault_durations": (0.1,)}},
+                    compile=CompileSettings(sweeps=3))
+    write_study(study, path)
+    assert read_study(path).definition == study.definition
+    assert study.task_set("test").fault_durations == (0.02, 0.05, 0.08, 0.1), "kept"
+
+
+def test_built_in_study_is_the_case_as_before():
+    from jaxgrid.cases import load
+
+    study, case = builtin("ieee39_fidvr"), load("ieee39_fidvr")
+    assert (study.config.observed_buses, study.config.action_buses, study.config.dt) == (
+        case.observed_buses, case.action_buses, case.dt)
+    assert [len(study.tasks(s)) for s in ("train", "test")] == [9, 120]
+    assert study.params == EnvParams()
+
+
+def test_stratified_sampler_draws_k_buses_by_k_durations():
+    tasks = TaskSet((4, 15, 21, 16), (0.0, 0.05, 0.08), (0.5, 1.0))
+    specs = tasks.specs(5)
+    sample = jax.jit(stratified_sampler(tasks, 5, 9))
+    for seed in range(5):
+        chosen = [specs[int(i)] for i in sample(jax.random.PRNGKey(seed))]
+        pairs = {(s.fault_bus, s.fault_duration) for s in chosen}
+        assert len(pairs) == 9 and len({b for b, _ in pairs}) == 3, "3 buses x 3 durations"
+    with pytest.raises(ValueError, match="m = 7 tasks are not k fault buses"):
+        stratified_sampler(tasks, 5, 7)
+
+
+# --------------------------------------------------------------------------- #
+# Bad input
+# --------------------------------------------------------------------------- #
+
+def test_raw_files_of_another_grid_name_both_files_and_the_difference(shared_cases, tmp_path):
+    text = (shared_cases / BASE).read_text()
+    changed = tmp_path / "changed.raw"
+    changed.write_text(text.replace("     2,      3,'1 ',", "     2,      3,'2 ',", 1))
+    with pytest.raises(ValueError, match=r"changed.raw and .*smallX_v30.raw are not one grid: "
+                                         r"branches \(from, to, circuit\): entry \d+ is "
+                                         r"\(2, 3, '1'\) against \(2, 3, '2'\)"):
+        from_files([shared_cases / BASE, changed], shared_cases / DYR, shared_cases / TASK)
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("actionScopeAry", ["Bus504", "Bus507", "Bus999"],
+     r"actionScopeAry: 'Bus999': the case .* has no bus 999"),
+    ("faultBusCandidates", ["Bus4", "Node7"], r"faultBusCandidates: 'Node7' is not a bus"),
+    ("observationScopeAry", ["Bus4", "Bus9990"], r"observationScopeAry: 'Bus9990'"),
+    ("unstableReward", "-1000", r"unstableReward = '-1000': must be a number"),
+])
+def test_task_json_naming_a_missing_bus_or_a_bad_value(shared_cases, tmp_path, key, value,
+                                                       message):
+    data = json.loads((shared_cases / TASK).read_text())
+    path = tmp_path / "task.json"
+    path.write_text(json.dumps({**data, key: value}))
+    with pytest.raises(ValueError, match=f"task.json: {message}"):
+        from_files(shared_cases / BASE, shared_cases / DYR, path)
+
+
+@pytest.mark.parametrize("toml, message", [
+    ('[grid]\nbuiltin = "ieee39_fidvr"\n[env]\nhistory = "ten"\n',
+     r"study.toml: env.history = 'ten': must be int"),
+    ('[grid]\nbuiltin = "ieee39_fidvr"\n[params]\nc_volt = 1.0\n',
+     r"study.toml: \[params\] unknown keys \['c_volt'\]"),
+    ('[grid]\nraw = ["nowhere.raw"]\n', r"study.toml: grid.raw = 'nowhere.raw': no such file"),
+    ('[grid]\nbuiltin = "ieee39_fidvr"\n[tasks.test]\nfault_buses = [4, 999]\n',
+     r"tasks.test.fault_buses: buses \[999\] are not in the case"),
+    ('[grid]\nbuiltin = "ieee39_fidvr"\n[tasks.extra]\nfault_buses = [4]\n',
+     r"tasks.extra needs \['fault_durations'\]"),
+    ('grid = 3\n', r"study.toml: grid = 3: must be a table"),
+    ('[grid]\nbuiltin = "ieee39_fidvr"\nload_levels = [2.0]\n', r"load_level = 2.0"),
+])
+def test_bad_study_files_name_the_key_and_value(tmp_path, toml, message):
+    path = tmp_path / "study.toml"
+    path.write_text(toml)
+    with pytest.raises(ValueError, match=message):
+        read_study(path)
+
+
+def test_policy_of_another_layout_is_refused_by_name(tmp_path):
+    """A saved policy knows its layout; evaluating it on a study with other buses names both."""
+    from experiments.evaluate import evaluate
+
+    folder = tmp_path / "policy"
+    folder.mkdir()
+    layout = {"observed_buses": [4, 504], "action_buses": [504], "history": 1,
+              "include_action_status": True}
+    (folder / "policy.json").write_text(json.dumps({
+        "spec": {"kind": "linear", "obs_size": 3, "action_size": 1, "hidden": [],
+                 "action_low": -0.2, "action_high": 0.0}, "study": "tiny", "layout": layout}))
+    np.savez(folder / "policy.npz", theta=np.zeros(4), mean=np.zeros(3), std=np.ones(3))
+    with pytest.raises(ValueError, match=r"trained on study 'tiny'\) has the layout "
+                                         r"\{'observed_buses': \[4, 504\].*; study "
+                                         r"'ieee39_fidvr' has \{'observed_buses': \[4, 504, 7"):
+        evaluate(builtin("ieee39_fidvr"), f"policy:{folder}", "test")
+
+
+def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):
+    import tomllib
+
+    path = tmp_path / "study.toml"
+    write_study(pnnl39, path)
+    data = tomllib.loads(path.read_text())
+    assert set(data["env"]) == {f.name for f in dataclasses.fields(pnnl39.config)} - {
+        "recovery_buses"}, "None fields are left out, every other one is explicit"
+    assert set(data["params"]) == {f.name for f in dataclasses.fields(EnvParams)}
+    assert all(p.startswith("/") for p in data["grid"]["raw"]), "absolute paths"
+    assert "builtin" not in data["grid"] and len(data["grid"]["raw"]) == 3
