@@ -14,10 +14,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 import numpy as np
 
 from experiments.studyargs import add_study_arguments, study_from_args
+from jaxgrid.study import write_study
 from jaxgrid.models.acmotor import Acmtblu1, motor_status
 from jaxgrid.recovery import envelope
 from jaxgrid.simulate import FaultEvent, simulate
@@ -51,10 +53,11 @@ def motor_shares(model, traj):
     return totals / max(weight, 1e-12)
 
 
-def draw(study, model, t: np.ndarray, vm: np.ndarray, shares: np.ndarray, fault: FaultEvent,
-         path: str) -> None:
-    """Write the two-panel FIDVR figure to `path`: voltages vm (n_t, n_bus) p.u. at times
-    t (n_t,) s, and motor shares (3, n_t) from `motor_shares`."""
+def draw(name: str, observed_buses, model, t: np.ndarray, vm: np.ndarray, shares: np.ndarray,
+         fault: FaultEvent, path: str) -> None:
+    """Write the two-panel FIDVR figure of study `name` to `path`: voltages vm (n_t, n_bus)
+    p.u. at the observed buses (RAW numbers) at times t (n_t,) s, and motor shares (3, n_t)
+    from `motor_shares`."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -62,14 +65,14 @@ def draw(study, model, t: np.ndarray, vm: np.ndarray, shares: np.ndarray, fault:
     cleared = fault.start + fault.duration
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 7), sharex=True,
                                       gridspec_kw={"height_ratios": [2, 1]})
-    for bus in study.config.observed_buses:
+    for bus in observed_buses:
         top.plot(t, vm[:, model.bus_index(bus)], lw=1, label=f"bus {bus}")
     fine = np.linspace(0, t[-1], 2000)
     top.step(fine, envelope(fine - cleared), "k--", where="post", lw=1.5,
              label="recovery envelope")
     top.set_ylabel("voltage (p.u.)")
     top.set_ylim(0, 1.15)
-    top.set_title(f"{study.name}: {fault.duration * 1000:.0f} ms fault at bus {fault.bus}, "
+    top.set_title(f"{name}: {fault.duration * 1000:.0f} ms fault at bus {fault.bus}, "
                   "no control")
     top.legend(ncol=4, fontsize=7, loc="lower right")
     top.grid(alpha=0.3)
@@ -100,7 +103,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     t, vm, shares = np.asarray(traj.t), np.asarray(traj.vm), motor_shares(model, traj)
-    draw(study, model, t, vm, shares, fault, args.out)
+    draw(f"{study.name} {study.points[args.point].label}", study.config.observed_buses, model,
+         t, vm, shares, fault, args.out)
+    write_study(study, Path(args.out).with_suffix(".study.toml"))
     judged = fault.start + fault.duration + 4.0
     k = min(int(np.searchsorted(t, judged - 1e-6)), len(t) - 1)
     when = "4 s after clearing" if t[k] >= judged - 1e-6 else f"at the end ({t[k]:.2f} s)"

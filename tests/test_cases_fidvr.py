@@ -199,5 +199,6 @@ def test_severe_fault_stalls_motors_and_the_figure_is_drawn(study, model, fidvr_
     assert running[2, judged] > 0.99, f"{study.name}: mild fault leaves {running[2, judged]:.0%}"
     severe = FaultEvent(EXPECT[study.name.rsplit("_load", 1)[0]][4][0], FAULT_START,
                         durations[1])
-    draw(study, model, t, fidvr_runs[1][1], shares[:, 1], severe, str(tmp_path / "fidvr.png"))
+    draw(study.name, study.observed_buses, model, t, fidvr_runs[1][1], shares[:, 1], severe,
+         str(tmp_path / "fidvr.png"))
     assert (tmp_path / "fidvr.png").stat().st_size > 10_000
