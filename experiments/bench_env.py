@@ -1,6 +1,6 @@
-"""Environment benchmark: batched agent steps per second of the FIDVR study cases.
+"""Environment benchmark: batched agent steps per second of FIDVR studies.
 
-    python -m experiments.bench_env [--cases ieee39_fidvr ieee300_fidvr]
+    python -m experiments.bench_env [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
         [--batch-sizes 1 16 128 512] [--devices 1 2] [--out bench_results/env.json]
 
 Each rollout is a whole 10 s episode (100 agent steps of 0.1 s) of `LoadSheddingEnv.rollout`
@@ -51,7 +51,8 @@ def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--cases", nargs="*", default=["ieee39_fidvr", "ieee300_fidvr"])
+    parser.add_argument("--studies", nargs="*", default=["ieee39_fidvr", "ieee300_fidvr"],
+                        help="built-in study names or study files")
     parser.add_argument("--batch-sizes", nargs="*", type=int, default=[1, 16, 128, 512])
     parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
     parser.add_argument("--repeats", type=int, default=1)
@@ -59,7 +60,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     report = {"jax": jax.__version__, "backend": jax.default_backend(),
               "cases": [bench_case(c, args.batch_sizes, args.devices, args.repeats)
-                        for c in args.cases]}
+                        for c in args.studies]}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(report, indent=2))
     print(f"wrote {args.out}")

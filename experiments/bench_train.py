@@ -1,12 +1,13 @@
-"""Training benchmark: seconds per PARS iteration and rollouts per second, by case and
+"""Training benchmark: seconds per PARS iteration and rollouts per second, by study and
 device count.
 
-    python -m experiments.bench_train [--cases ieee39_fidvr ieee300_fidvr] [--devices 1 2]
-                                      [--repeats 2] [--out bench_results/train.json]
+    python -m experiments.bench_train [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
+        [--devices 1 2] [--repeats 2] [--out bench_results/train.json]
 
-Each case runs with the study's defaults of its training command (LSTM; 39-bus N = 16,
+Each built-in study runs with the defaults of its training command (LSTM; 39-bus N = 16,
 b = 8; 300-bus N = 128, b = 64; m = 9 tasks, 10 s episodes), so an iteration is 2·N·m
-rollouts: 288 (39-bus) and 2304 (300-bus). The rollout batch is sharded over a 1-D mesh of
+rollouts: 288 (39-bus) and 2304 (300-bus); a study file runs with those of
+`experiments.train` (the 39-bus ones). The rollout batch is sharded over a 1-D mesh of
 the first `d` CPU devices (or of GPUs, where the backend has them). The first call (compile +
 run) and the best of `--repeats` later calls are timed.
 """
@@ -28,18 +29,20 @@ import numpy as np  # noqa: E402
 from jax.sharding import Mesh  # noqa: E402
 
 from ars.pars import ParsConfig, init_state  # noqa: E402
-from experiments import train_39bus, train_300bus  # noqa: E402
+from experiments import train, train_39bus, train_300bus  # noqa: E402
 from experiments.bench_sim import _timed  # noqa: E402
 from experiments.train import build  # noqa: E402
-from jaxgrid.study import builtin  # noqa: E402
+from jaxgrid.study import load_study  # noqa: E402
 
 DEFAULTS = {"ieee39_fidvr": train_39bus.DEFAULTS, "ieee300_fidvr": train_300bus.DEFAULTS}
+PLAIN = train.DEFAULTS
 TASKS_PER_ITERATION = 9
 EPISODE = 10.0  # s
 
 
 def bench_case(case: str, device_counts, repeats: int) -> dict:
-    defaults = DEFAULTS[case]
+    defaults = DEFAULTS.get(case, PLAIN)
+    study = load_study(case)
     config = ParsConfig(directions=defaults["directions"], top=defaults["top"],
                         decay=defaults["decay"], tasks_per_iteration=TASKS_PER_ITERATION)
     hidden = tuple(int(h) for h in defaults["hidden"].split(","))
@@ -51,7 +54,7 @@ def bench_case(case: str, device_counts, repeats: int) -> dict:
     for n_dev in device_counts:
         mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
         start = time.perf_counter()
-        trainer = build(builtin(case), defaults["policy"], hidden, config, 1, EPISODE,
+        trainer = build(study, defaults["policy"], hidden, config, 1, EPISODE,
                         mesh=mesh)
         build_s = time.perf_counter() - start
         state = init_state(trainer.policy, config)
@@ -76,7 +79,8 @@ def bench_case(case: str, device_counts, repeats: int) -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--cases", nargs="*", default=list(DEFAULTS), choices=list(DEFAULTS))
+    parser.add_argument("--studies", nargs="*", default=list(DEFAULTS),
+                        help="built-in study names or study files")
     parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--out", default="bench_results/train.json")
@@ -86,7 +90,7 @@ def main(argv=None) -> None:
     report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
               "backend": jax.default_backend(), "devices": len(jax.devices()),
               "episode_s": EPISODE,
-              "cases": [bench_case(c, args.devices, args.repeats) for c in args.cases]}
+              "cases": [bench_case(c, args.devices, args.repeats) for c in args.studies]}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(report, indent=2))
     print(f"wrote {args.out}")

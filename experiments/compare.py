@@ -15,11 +15,13 @@ from pathlib import Path
 
 
 def _key(task: dict) -> tuple:
-    return task["fault_bus"], task["fault_duration"], task["operating_point"]
+    return (task["fault_bus"], task["fault_duration"], task.get("fault_start"),
+            task["operating_point"])
 
 
 def load(path: str) -> dict:
-    """An evaluate result with its tasks keyed by (fault bus, duration, operating point)."""
+    """An evaluate result with its tasks keyed by (fault bus, duration, start, operating
+    point)."""
     result = json.loads(Path(path).read_text())
     return {"controller": result["controller"], "summary": result["summary"],
             "tasks": {_key(t): t for t in result["tasks"]}}

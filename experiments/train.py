@@ -217,6 +217,10 @@ def _learning_curve(log: list[dict], path: Path, study: str) -> None:
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.plot(it, [m["reward_mean"] for m in log], label="mean over perturbed rollouts")
     ax.plot(it, [m["reward_max"] for m in log], alpha=0.6, label="best direction")
+    window = 20  # iterations: the tasks drawn change from one iteration to the next
+    if len(log) > window:
+        smooth = np.convolve([m["reward_mean"] for m in log], np.ones(window) / window, "valid")
+        ax.plot(it[window - 1:], smooth, "k", lw=1.5, label=f"mean, {window}-iteration average")
     ax.set_xlabel("iteration")
     ax.set_ylabel("reward per episode")
     ax.set_title(f"PARS on {study}")
