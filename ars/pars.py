@@ -4,9 +4,11 @@ One jit-compiled function does a whole iteration:
   1. sample N directions δ ~ N(0, I) over the flat policy vector θ;
   2. build the 2N vectors θ ± ν·δ and pick m tasks (the same for every direction and sign,
      so r+ − r− measures the perturbation alone), uniformly or by a given sampler;
-  3. roll out all 2N·m (θ, task) pairs as a vmap over the 2N vectors (sharded over a 1-D
-     device mesh, `jax.sharding`) of a vmap over the m tasks, so the m rollouts of one vector
-     share it; observations normalised by the frozen running stats;
+  3. roll out all 2N·m (θ, task) pairs as a vmap over the m tasks of a vmap over the 2N
+     vectors (sharded over a 1-D device mesh, `jax.sharding`): a task's data (its grid model)
+     is shared by its 2N rollouts and each vector by its m rollouts; observations normalised
+     by the frozen running stats. (This nesting measured 1.1× faster than one flat vmap on
+     the 39-bus study, and 1.8× faster than the directions outermost);
   4. average the returns per ± direction, keep the top b directions by max(r+, r−);
   5. θ += α / (b·σ_b) Σ_top (r+ − r−)·δ, σ_b the std of the 2b selected returns (1 if 0);
   6. α ← ε·α, ν ← ε·ν; merge the observation statistics of every rollout.
@@ -161,12 +163,12 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
         picked = jax.tree.map(lambda a: a[chosen], tasks)
         mean, std = state.stats.mean, state.stats.std
 
-        def per_vector(theta):
-            return jax.vmap(lambda task: episode(apply, (theta, mean, std), task, carry0, data))(
-                picked)
+        def per_task(task):
+            return jax.vmap(lambda theta: episode(apply, (theta, mean, std), task, carry0, data))(
+                thetas)
 
-        out = jax.vmap(per_vector)(thetas)  # every leaf (2N, m, ...)
-        returns = clean_returns(out["reward"].mean(axis=1))
+        out = jax.vmap(per_task)(picked)  # every leaf (m, 2N, ...)
+        returns = clean_returns(out["reward"].mean(axis=0))
         r_plus, r_minus = returns[:n_dir], returns[n_dir:]
         theta, _ = ars_update(state.theta, delta, r_plus, r_minus, config.top, state.step_size)
         _, (count, total, total_sq) = out["policy_carry"]
