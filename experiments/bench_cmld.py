@@ -1,0 +1,180 @@
+"""WECC composite loads (CMLDBLU2) on the original study's files: FIDVR figures and speed.
+
+    python -m experiments.bench_cmld [--out bench_results/cmld.json] [--skip-2000]
+
+1. IEEE 300 (`IEEE300Bus_modified_noHVDC_v2.raw` + `IEEE300_dyn_cmld_zone1.dyr`, strict,
+   dt 2 ms as the study's InterPSS configuration, 10 s): a flat run (largest |ΔV| over all
+   buses, over the composite load buses, and where it is largest) and the training faults of
+   the LSTM moreActionBuses task file (fault buses of `faultBusCandidates`, 0.08 s at 1.0 s):
+   per fault, how many of the 46 action buses (`Bus<N>_loadBus`) are below
+   `minVoltRecoveryLevel` `maxVoltRecoveryTime` after clearing.
+2. The `baseCases/` operating points: compile, 10-s flat run, largest |ΔV|, diverged.
+3. Speed: seconds per Heun step of the same 300-bus case with the composite loads and with
+   static loads only (`IEEE300_dyn_v2.dyr`, the same machines), batch of BATCH fault tasks,
+   warm calls (compile timed apart); the ratio.
+4. ACTIVSg2000 (`ACTIVSg2000.RAW` + `ACTIVSg2000_dyn_cmld_zone3_v1.dyr`, lenient: its IEEEST
+   stabilizers and GGOV1 governors are not supported, dt 5 ms as its task configuration):
+   compile time, a 1-s flat run (largest |ΔV|), seconds per simulated second.
+Writes JSON to --out and prints the figures.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from jaxgrid.compile import CompileOptions, compile_model
+from jaxgrid.io.dyr import read_dyr
+from jaxgrid.io.raw import read_raw
+from jaxgrid.simulate import FaultEvent, make_task, simulate_batch, stack_tasks
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "cases"
+IEEE300 = SHARED / "ieee300"
+TASK_FILE = IEEE300 / ("IEEE300_RL_loadShedding_zone1_continuous_LSTM_new_lessfaultbuses_"
+                       "moreActionBuses_multipfcases.json")
+DT_300, DT_2000 = 0.002, 0.005  # s: IEEE300_dyn_config.json, Texas2000_dyn_config.json
+T_END, FAULT_START, FAULT_DURATION = 10.0, 1.0, 0.08  # s
+SAMPLE = 0.1  # s between trajectory samples
+BATCH = 8  # fault tasks per timed call of the speed comparison
+TIMING_T = 1.0  # s simulated per timed call
+
+
+def _compile(raw: Path, dyr: Path, strict: bool = True):
+    """(model, compile seconds); RAW warnings (tap control not modelled) and InitWarnings
+    are kept in model.notes."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        case = read_raw(raw)
+        start = time.perf_counter()
+        model = compile_model(case, read_dyr(dyr), CompileOptions(strict=strict))
+    return model, time.perf_counter() - start
+
+
+def _drift(model, vm_flat) -> dict:
+    """Largest |ΔV| of a flat run's samples vm_flat (n_t, n_bus): overall, where, at the
+    composite loads' internal buses and without the worst bus."""
+    drift = np.abs(vm_flat - np.abs(np.asarray(model.v0))).max(axis=0)
+    internal = [k for k, n in enumerate(model.bus_names) if "_" in n]
+    worst = int(drift.argmax())
+    return {"max_dv": float(drift.max()), "max_dv_bus": model.bus_names[worst],
+            "max_dv_composite_buses": float(drift[internal].max()) if internal else None,
+            "max_dv_without_worst_bus": float(np.delete(drift, worst).max())}
+
+
+def _flat(model, t_end: float, dt: float) -> dict:
+    """`_drift` of a flat run of t_end s, and whether it diverged."""
+    traj = simulate_batch(model, stack_tasks([make_task(model, None)]), t_end, dt,
+                          decimation=int(round(SAMPLE / dt)))
+    return {**_drift(model, np.asarray(traj.vm)[0]),
+            "diverged": bool(np.asarray(traj.diverged)[0])}
+
+
+def ieee300_faults(model) -> dict:
+    """Flat run and the task file's training faults, 10 s at 2 ms."""
+    config = json.loads(TASK_FILE.read_text())
+    level, delay = config["minVoltRecoveryLevel"], config["maxVoltRecoveryTime"]
+    action = [model.bus_index_by_name(n) for n in config["actionScopeAry"]]
+    faults = [model.bus_number_by_name(n) for n in config["faultBusCandidates"]]
+    tasks = [make_task(model, None)] + [
+        make_task(model, FaultEvent(b, FAULT_START, FAULT_DURATION)) for b in faults]
+    start = time.perf_counter()
+    traj = simulate_batch(model, stack_tasks(tasks), T_END, DT_300,
+                          decimation=int(round(SAMPLE / DT_300)))
+    vm = np.asarray(traj.vm)
+    wall = time.perf_counter() - start
+    t = np.asarray(traj.t).reshape(-1, vm.shape[1])[0]  # the same sample times for every task
+    k = int(np.argmin(np.abs(t - (FAULT_START + FAULT_DURATION + delay))))
+    after = vm[:, k][:, action]
+    return {
+        "wall_s_compile_and_run": wall, "flat": _drift(model, vm[0]),
+        "recovery_level": level, "seconds_after_clearing": delay, "sample_t": float(t[k]),
+        "faults": [{"bus": b, "duration": FAULT_DURATION,
+                    "load_buses_below": int((after[i + 1] < level).sum()),
+                    "lowest_load_bus_v": float(after[i + 1].min()),
+                    "diverged": bool(np.asarray(traj.diverged)[i + 1])}
+                   for i, b in enumerate(faults)],
+    }
+
+
+def seconds_per_step(model, dt: float) -> tuple[float, float]:
+    """(first call s, best warm s per Heun step) for BATCH fault tasks over TIMING_T s."""
+    candidates = [b for b in model.bus_numbers if b in set(model.gen_bus)][:BATCH]
+    tasks = stack_tasks([make_task(model, FaultEvent(b, 0.1, 0.05)) for b in candidates])
+    n_steps = int(round(TIMING_T / dt))
+
+    def call():
+        start = time.perf_counter()
+        np.asarray(simulate_batch(model, tasks, TIMING_T, dt, decimation=n_steps).vm)
+        return time.perf_counter() - start
+
+    first = call()
+    return first, min(call() for _ in range(3)) / n_steps
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="bench_results/cmld.json")
+    parser.add_argument("--skip-2000", action="store_true", help="leave out ACTIVSg2000")
+    args = parser.parse_args(argv)
+    out: dict = {}
+
+    model, compile_s = _compile(IEEE300 / "IEEE300Bus_modified_noHVDC_v2.raw",
+                                IEEE300 / "IEEE300_dyn_cmld_zone1.dyr")
+    out["ieee300"] = {"compile_s": compile_s, "n_bus": model.n_bus, **ieee300_faults(model)}
+    r = out["ieee300"]
+    print(f"ieee300 CMLD: compile {compile_s:.1f} s, {model.n_bus} buses; flat 10 s: max |dV| "
+          f"{r['flat']['max_dv']:.2e} at {r['flat']['max_dv_bus']}, composite buses "
+          f"{r['flat']['max_dv_composite_buses']:.2e}, others {r['flat']['max_dv_without_worst_bus']:.2e}")
+    for f in r["faults"]:
+        print(f"  fault bus {f['bus']} {f['duration']} s: {f['load_buses_below']} of 46 load buses "
+              f"< {r['recovery_level']} p.u. {r['seconds_after_clearing']} s after clearing "
+              f"(lowest {f['lowest_load_bus_v']:.3f}, diverged {f['diverged']})")
+
+    out["base_cases"] = {}
+    for raw in sorted((IEEE300 / "baseCases").glob("*.raw")):
+        m, c = _compile(raw, IEEE300 / "IEEE300_dyn_cmld_zone1.dyr")
+        out["base_cases"][raw.name] = {"compile_s": c, **_flat(m, T_END, DT_300)}
+        b = out["base_cases"][raw.name]
+        print(f"  {raw.name}: compile {c:.1f} s, flat 10 s max |dV| {b['max_dv']:.2e} at "
+              f"{b['max_dv_bus']}, composite buses {b['max_dv_composite_buses']:.2e}, "
+              f"diverged {b['diverged']}")
+
+    static, _ = _compile(IEEE300 / "IEEE300Bus_modified_noHVDC_v2.raw",
+                         IEEE300 / "IEEE300_dyn_v2.dyr")
+    timing = {}
+    for name, m in (("composite", model), ("static", static)):
+        first, per_step = seconds_per_step(m, DT_300)
+        timing[name] = {"first_call_s": first, "s_per_step": per_step, "n_slot": len(m.slot_bus)}
+    timing["ratio"] = timing["composite"]["s_per_step"] / timing["static"]["s_per_step"]
+    out["speed_ieee300"] = dict(timing, batch=BATCH, dt=DT_300)
+    print(f"speed (batch {BATCH}): composite {timing['composite']['s_per_step'] * 1e3:.3f} ms/step, "
+          f"static {timing['static']['s_per_step'] * 1e3:.3f} ms/step, ratio {timing['ratio']:.2f}")
+
+    if not args.skip_2000:
+        big, c = _compile(SHARED / "activsg2000/ACTIVSg2000.RAW",
+                          SHARED / "activsg2000/ACTIVSg2000_dyn_cmld_zone3_v1.dyr", strict=False)
+        start = time.perf_counter()
+        flat = _flat(big, 1.0, DT_2000)
+        first = time.perf_counter() - start
+        start = time.perf_counter()
+        _flat(big, 1.0, DT_2000)
+        warm = time.perf_counter() - start
+        out["activsg2000"] = {"compile_s": c, "n_bus": big.n_bus, "n_slot": len(big.slot_bus),
+                              "n_composite": len(big.loads[-1].index), "dt": DT_2000,
+                              "first_1s_run_s": first, "s_per_simulated_s": warm, **flat}
+        a = out["activsg2000"]
+        print(f"activsg2000: compile {c:.1f} s, {a['n_bus']} buses, {a['n_composite']} CMLD; 1-s flat "
+              f"run: max |dV| {a['max_dv']:.2e} at {a['max_dv_bus']}, first call {first:.1f} s, "
+              f"{warm:.2f} s per simulated s (warm)")
+
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=2))
+    return out
+
+
+if __name__ == "__main__":
+    main()
