@@ -179,7 +179,8 @@ def main(argv=None) -> dict:
     r = out["ieee300"]
     print(f"ieee300 CMLD: compile {compile_s:.1f} s, {model.n_bus} buses; flat 10 s: max |dV| "
           f"{r['flat']['max_dv']:.2e} at {r['flat']['max_dv_bus']}, composite buses "
-          f"{r['flat']['max_dv_composite_buses']:.2e}, others {r['flat']['max_dv_without_worst_bus']:.2e}")
+          f"{r['flat']['max_dv_composite_buses']:.2e}, "
+          f"others {r['flat']['max_dv_without_worst_bus']:.2e}")
     for f in r["faults"]:
         print(f"  fault bus {f['bus']} {f['duration']} s: {f['load_buses_below']} of 46 load buses "
               f"< {r['recovery_level']} p.u. {r['seconds_after_clearing']} s after clearing "
@@ -202,7 +203,8 @@ def main(argv=None) -> dict:
         timing[name] = {"first_call_s": first, "s_per_step": per_step, "n_slot": len(m.slot_bus)}
     timing["ratio"] = timing["composite"]["s_per_step"] / timing["static"]["s_per_step"]
     out["speed_ieee300"] = dict(timing, batch=BATCH, dt=DT_300)
-    print(f"speed (batch {BATCH}): composite {timing['composite']['s_per_step'] * 1e3:.3f} ms/step, "
+    print(f"speed (batch {BATCH}): composite "
+          f"{timing['composite']['s_per_step'] * 1e3:.3f} ms/step, "
           f"static {timing['static']['s_per_step'] * 1e3:.3f} ms/step, ratio {timing['ratio']:.2f}")
 
     if not args.skip_2000:

@@ -233,7 +233,8 @@ def test_motors_a_to_c_are_cim5bl(tmp_path, m):
     #        RA   XA   XM   R1   X1   R2 X2 E1 SE1 E2 SE2 MBASE PMULT H   VI TI TB D TNOM
     values = [c["ra"], c["xa"], c["xm"], c["r1"], c["x1"], 0, 0, 0, 0, 0, 0, sm, 0, c["h"],
               0, 0, 0, c["d"], 0]
-    (tmp_path / "c.dyr").write_text(f"2 'CIM5BL' '1' 1 {' '.join(repr(float(v)) for v in values)} /\n")
+    text = " ".join(repr(float(v)) for v in values)
+    (tmp_path / "c.dyr").write_text(f"2 'CIM5BL' '1' 1 {text} /\n")
     pc = Cim5bl.read(read_dyr(tmp_path / "c.dyr").records)
     pc, xc, zc, sc, _ = Cim5bl.init(pc, LoadSite(v0=np.array([v_l]), record_p=np.array([p_l]),
                                                  bus_p=np.array([p_l]), sbase=SBASE,

@@ -225,6 +225,7 @@ class Cmldblu2(LoadModel):
     states = tuple(f"m{x}_{s}" for x in MOTORS for s in Cim5bl.states)
     flags = (tuple(f"d_{f}" for f in Acmtblu1.flags) + ("vmin_e",)
              + tuple(f"{f}{k}{x}" for x in MOTORS for k in "12" for f in ("on", "ttr", "trc")))
+    n_record_icons = 2  # ICONs written before the CONs (rec.icons)
 
     @classmethod
     def read(cls, records: Sequence[DyrRecord]) -> dict[str, np.ndarray]:
@@ -246,8 +247,6 @@ class Cmldblu2(LoadModel):
                                   CompositeWarning, stacklevel=2)
         p.update(icon1=icons[:, 0], icon2=icons[:, 1])
         return p
-
-    n_record_icons = 2
 
     @classmethod
     def check_combination(cls, p: dict[str, float]) -> str | None:
@@ -348,29 +347,29 @@ def _motor_share(p, z, m: str):
     return jnp.maximum(1.0 - off, 0.0)
 
 
-def _electronic_fraction(p, vmag, vmin_e, xp=jnp):
+def _electronic_fraction(p, vmag, vmin_e):
     """Fvl (n,): connected share of the electronic load at |V| with dip memory vmin_e (§4)."""
     span = p["vd1"] - p["vd2"]
     falling = (vmag - p["vd2"]) / span
     recovering = ((vmin_e - p["vd2"]) + p["frcel"] * (vmag - vmin_e)) / span
-    above = xp.where(vmin_e >= p["vd1"], 1.0,
-                     ((vmin_e - p["vd2"]) + p["frcel"] * (p["vd1"] - vmin_e)) / span)
-    band = xp.where(vmag <= vmin_e, falling, recovering)
-    fvl = xp.where(vmag < p["vd2"], 0.0, xp.where(vmag < p["vd1"], band, above))
-    return xp.clip(fvl, 0.0, 1.0)
+    above = jnp.where(vmin_e >= p["vd1"], 1.0,
+                      ((vmin_e - p["vd2"]) + p["frcel"] * (p["vd1"] - vmin_e)) / span)
+    band = jnp.where(vmag <= vmin_e, falling, recovering)
+    fvl = jnp.where(vmag < p["vd2"], 0.0, jnp.where(vmag < p["vd1"], band, above))
+    return jnp.clip(fvl, 0.0, 1.0)
 
 
-def _electronic_power(p, vmag, vmin_e, xp=jnp):
+def _electronic_power(p, vmag, vmin_e):
     """Complex power (n,) of the electronic load, p.u. system base."""
-    return p["p_el0"] * _electronic_fraction(p, vmag, vmin_e, xp) * (1.0 + 1j * p["tan_el"])
+    return p["p_el0"] * _electronic_fraction(p, vmag, vmin_e) * (1.0 + 1j * p["tan_el"])
 
 
-def _static_power(p, vmag, dfm, xp=jnp):
+def _static_power(p, vmag, dfm):
     """Complex power (n,) of the static load at |V| and frequency deviation dfm (§4).
 
     Below STATIC_V_BREAK the load is the admittance it has at the break.
     """
-    vc = xp.maximum(vmag, STATIC_V_BREAK)
+    vc = jnp.maximum(vmag, STATIC_V_BREAK)
     r = vc / p["v_l0"]
     shape_p = p["p1c"] * r ** p["p1e"] + p["p2c"] * r ** p["p2e"] + (1.0 - p["p1c"] - p["p2c"])
     shape_q = p["q1c"] * r ** p["q1e"] + p["q2c"] * r ** p["q2e"] + (1.0 - p["q1c"] - p["q2c"])
@@ -449,12 +448,15 @@ def expand(case: Case, vm: np.ndarray, va: np.ndarray, records: Sequence[DyrReco
              + (loads.p_current[units] + 1j * loads.q_current[units]) * vmr
              + (loads.p_impedance[units] + 1j * loads.q_impedance[units]) * vmr ** 2)
     labels = tuple(device_label(r) for r in records)
-    for k in np.flatnonzero(~(s_rec.real > 0)):
-        raise ModelError(f"{labels[k]}: the load record draws P = {s_rec[k].real * case.base_mva:g} "
-                         "MW at the power flow; the composite load needs P > 0")
+    for k in np.flatnonzero(~(s_rec.real > 0))[:1]:
+        raise ModelError(f"{labels[k]}: the load record draws P = "
+                         f"{s_rec[k].real * case.base_mva:g} MW at the power flow; the "
+                         "composite load needs P > 0")
     init = initialise(p, s_rec, vmr * np.exp(1j * va[bus]), case.base_mva, case.frequency_hz,
                       options, motors, labels)
     notes.extend(f"load report: {line}" for line in init.notes)
+    notes.extend(f"load report: {label}: CMLDBLU1 has no FRCEL: taken as 0"
+                 for r, label in zip(records, labels) if r.model == "CMLDBLU1")
 
     rows = to_rows(case)
     top = 10 ** len(str(int(np.abs(number).max())))
@@ -701,8 +703,5 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
         if abs(comp["st"][k].real - share["st"][k] * p_l[k]) > 1e-9:
             notes.append(f"{labels[k]}: motor D draws {s_d[k].real * sbase:.3f} MW at V_L, not "
                          f"its share; the static load takes the difference")
-    for k, label in enumerate(labels):
-        if "CMLDBLU1" in label:
-            notes.append(f"{label}: CMLDBLU1 has no FRCEL: taken as 0")
     return Initialised(params=params, states=states, flags=flags, s0=drawn, v_low=v_low,
                        v_load=v_l, notes=notes)
