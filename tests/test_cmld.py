@@ -35,7 +35,9 @@ from jaxgrid.io.raw import RawWarning, read_raw
 from jaxgrid.models.acmotor import Acmtblu1, MotorOptions
 from jaxgrid.models.base import LoadSite, ModelError
 from jaxgrid.models.cmld import (Cmldblu2, CompositeOptions, CompositeWarning,
-                                 _electronic_fraction, initialise, read_records)
+                                 _electronic_fraction, expand, initialise, internal_buses,
+                                 read_records)
+from jaxgrid.powerflow import solve
 from jaxgrid.models.induction import Cim5bl
 
 DT = 0.002  # s, the study's InterPSS step
@@ -124,6 +126,23 @@ def test_internal_buses_are_named_and_numbered(system):
     assert system.load_slot(22) == 0 and system.load_bus == (3,)
     with pytest.raises(ValueError, match="Bus7_loadBus"):
         system.bus_index_by_name("Bus7_loadBus")
+
+
+def test_study_observation_count_with_the_load_buses(shared_cases):
+    # the paper's 154 observed buses: zone 1 at 60 kV or more (the task file's
+    # observationScopeAry and observationVoltThreshold) in the expanded case
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RawWarning)
+        case = read_raw(shared_cases / "ieee300/IEEE300Bus_modified_noHVDC_v2.raw")
+    records = read_dyr(shared_cases / "ieee300/IEEE300_dyn_cmld_zone1.dyr").by_model("CMLDBLU2")
+    assert internal_buses(case, records)[0] == ((100001, "Bus1_lowBus"),
+                                                (200001, "Bus1_loadBus"))
+    pf = solve(case)
+    grown = expand(case, pf.vm, pf.va, records, CompositeOptions(), MotorOptions(), [])
+    buses = grown.case.buses
+    observed = (buses.zone == 1) & (buses.base_kv >= 60.0)
+    assert observed.sum() == 154
+    assert sum(name.endswith("_loadBus") for name in np.asarray(buses.name)[observed]) == 46
 
 
 def test_initialised_at_rest_and_drawing_the_power_flow_load(system):

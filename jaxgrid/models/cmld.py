@@ -6,7 +6,8 @@ Structure, CONs, bases, components, discrete logic and initialisation follow
 `jaxgrid.models.induction` (`shared/specs/induction-motors.md`), both imported, not copied.
 
 Network (spec §1, §7). At compile time `expand` adds, per record at system bus N (load
-LID), two buses and two branches to the case:
+LID), two buses and two branches to the case (numbers, names, zones and base kV:
+`internal_buses`):
   * the low-side bus, number N + M·(2j + 1), name "Bus<N>_lowBus", with the shunt
     Bss + Fb·Bf (system p.u.);
   * the load bus, number N + M·(2j + 2), name "Bus<N>_loadBus" (the name the PNNL task
@@ -459,18 +460,14 @@ def expand(case: Case, vm: np.ndarray, va: np.ndarray, records: Sequence[DyrReco
                  for r, label in zip(records, labels) if r.model == "CMLDBLU1")
 
     rows = to_rows(case)
-    top = 10 ** len(str(int(np.abs(number).max())))
-    seen: dict[int, int] = {}
     names, load_numbers = {}, []
-    for k, r in enumerate(records):
-        j = seen[r.bus] = seen.get(r.bus, -1) + 1
-        tail = "" if j == 0 else f"_{r.device_id.strip()}"
-        low, load = r.bus + top * (2 * j + 1), r.bus + top * (2 * j + 2)
-        names[low], names[load] = f"Bus{r.bus}_lowBus{tail}", f"Bus{r.bus}_loadBus{tail}"
+    for k, (r, ((low, low_name), (load, load_name))) in enumerate(
+            zip(records, internal_buses(case, records))):
+        names[low], names[load] = low_name, load_name
         load_numbers.append(load)
         parent = rows["buses"][int(bus[k])]
-        for n, v in ((low, init.v_low[k]), (load, init.v_load[k])):
-            rows["buses"].append(dict(parent, number=n, name=names[n], kind=PQ, base_kv=0.0,
+        for n, v, kv in ((low, init.v_low[k], 0.0), (load, init.v_load[k], parent["base_kv"])):
+            rows["buses"].append(dict(parent, number=n, name=names[n], kind=PQ, base_kv=kv,
                                       vm=abs(v), va=np.angle(v), line=r.line))
         rows["loads"][int(units[k])] = dict(rows["loads"][int(units[k])], in_service=False)
         rows["loads"].append(dict(rows["loads"][int(units[k])], bus=load, in_service=True,
@@ -488,7 +485,7 @@ def expand(case: Case, vm: np.ndarray, va: np.ndarray, records: Sequence[DyrReco
                                      r=init.params["r_fdr"][k], x=init.params["x_fdr"][k],
                                      tap=1.0, is_transformer=False))
     rows["notes"] = tuple(case.notes) + (f"{len(records)} composite load(s): internal buses "
-                                         f"numbered N + {top}·(1, 2)",)
+                                         "added (jaxgrid.models.cmld.internal_buses)",)
     expanded = build_case(**rows)
     v_new = np.concatenate([init.v_low, init.v_load])
     order = np.ravel(np.stack([np.arange(len(records)), np.arange(len(records)) + len(records)],
@@ -499,6 +496,28 @@ def expand(case: Case, vm: np.ndarray, va: np.ndarray, records: Sequence[DyrReco
                      load_bus=expanded.bus_index(load_numbers), params=init.params,
                      states=init.states, flags=init.flags, s0=init.s0, labels=labels,
                      names=names)
+
+
+def internal_buses(case: Case, records: Sequence[DyrRecord]):
+    """[((low-side number, name), (load-bus number, name))] per composite-load record.
+
+    For a record at RAW bus N: N + M·(2j + 1) "Bus<N>_lowBus" and N + M·(2j + 2)
+    "Bus<N>_loadBus", M the smallest power of ten above every |bus number| of `case`, j the
+    number of earlier records (in `records` order) at the same bus; j > 0 appends
+    "_<LID>" to both names. Both buses take N's area and zone; the load bus takes N's base
+    kV and the low-side bus 0 kV, so that a "zone Z above X kV" observation rule picks the
+    load buses and not the low sides (the study's 300-bus task: 108 zone-1 buses above
+    60 kV + 46 load buses = its 154 observed buses).
+    """
+    top = 10 ** len(str(int(np.abs(case.buses.number).max())))
+    seen: dict[int, int] = {}
+    out = []
+    for r in records:
+        j = seen[r.bus] = seen.get(r.bus, -1) + 1
+        tail = "" if j == 0 else f"_{r.device_id.strip()}"
+        out.append(((r.bus + top * (2 * j + 1), f"Bus{r.bus}_lowBus{tail}"),
+                    (r.bus + top * (2 * j + 2), f"Bus{r.bus}_loadBus{tail}")))
+    return out
 
 
 class Initialised(NamedTuple):
