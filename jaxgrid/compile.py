@@ -25,7 +25,7 @@ from jaxgrid.grid import DeviceGroup, GridModel, GridState
 from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
 from jaxgrid.models.acmotor import LOAD_MOTORS, MotorOptions
 from jaxgrid.models.base import ExciterInputs, LoadSite, ModelError, device_label
-from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, expand
+from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, expand, run_model
 from jaxgrid.models.exciters import EXCITERS
 from jaxgrid.models.governors import GOVERNORS
 from jaxgrid.models.induction import INDUCTION_MOTORS
@@ -162,9 +162,13 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     s_load = _bus_load_at(case, pf)
     motors = _load_model_groups(case, pf, s_load.real, records["load"], load_keys, options,
                                 notes)
+    upstream = np.zeros(0, dtype=int)
     if composite:
-        motors.append(LoadModelUnits(COMPOSITE_LOADS["CMLDBLU2"], grown.labels, grown.load_bus,
-                                     grown.params, grown.states, grown.flags, grown.s0))
+        motors.append(LoadModelUnits(run_model(options.composite), grown.labels,
+                                     grown.load_bus, grown.params, grown.states, grown.flags,
+                                     grown.s0))
+        if options.composite.shedding == "feeder":  # the system buses get load slots too
+            upstream = grown.system_bus
     s_static = s_load.copy()
     for m in motors:
         np.add.at(s_static, m.buses, -m.s0)
@@ -174,9 +178,12 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     np.add.at(y, (gen.bus[order], gen.bus[order]), y_norton)
     for m in motors:
         np.add.at(y, (m.buses, m.buses), m.params["y_norton"])
-    load_bus = _load_buses(case, s_load, options, [b for m in motors for b in m.buses])
+    load_bus = _load_buses(case, s_load, options,
+                           [b for m in motors for b in m.buses] + upstream.tolist())
     slot_bus = np.concatenate([gen.bus[order], load_bus]).astype(int)
     slot_of = {int(b): k for k, b in enumerate(load_bus)}
+    if upstream.size:
+        motors[-1].params["upstream_slot"] = np.array([slot_of[int(b)] for b in upstream])
     load_groups = tuple(
         DeviceGroup(params=m.params, model=m.model, index=tuple(slot_of[int(b)] for b in m.buses),
                     labels=m.labels) for m in motors)

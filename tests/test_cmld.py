@@ -17,6 +17,7 @@ The long runs (10-s faults on the 300-bus system, the 2000-bus case, speed) are 
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import warnings
 from pathlib import Path
@@ -337,6 +338,35 @@ def test_end_use_shedding_scales_every_component(system):
     for left in (0.8, 0.35, 0.0):
         assert drawn(left) == pytest.approx(left * full, abs=1e-14)
     assert abs(full) > 0.5, "the unit draws current at 0.83 p.u."
+
+
+def converged_bus_voltages(model, x):
+    """All bus voltages (n_bus,) of the network solution at state x, sweeps to convergence."""
+    model = dataclasses.replace(model, sweeps=80)
+    fault = network.fault_view(model.network, 0, 1.0)
+    _, current, residual, _ = solve_network(model, x, fault, 0.0)
+    assert float(residual) < NET_TOL, f"sweeps did not converge ({float(residual):.1e})"
+    return np.asarray(network.bus_voltages(model.network, fault, 0.0, current))
+
+
+def test_feeder_shedding_scales_the_substation_current(tmp_path, system):
+    model = build(tmp_path, record(CONS), composite=CompositeOptions(shedding="feeder"))
+    assert model.load_bus == (1, 3), "the system bus gets a load slot for the feeder share"
+    p = model.loads[0].params
+    for left in (1.0, 0.6):
+        x = model.initial.replace(load_left=np.array([1.0, left]))
+        vb = converged_bus_voltages(model, x)
+        i_line = (vb[0] - vb[1]) / 0.05j  # from the infinite bus, the only path to bus 2
+        i_feeder = (vb[1] - vb[2] / p["ratio"][0]) / (1j * p["x_xf"][0])  # a whole feeder
+        assert abs(i_line - left * i_feeder) < NET_TOL, f"left = {left}"
+    # end-use shedding of the same share instead keeps every feeder in service
+    x = system.initial.replace(load_left=np.array([0.6]))
+    vb_end = converged_bus_voltages(system, x)
+    p_end = system.loads[0].params
+    i_line = (vb_end[0] - vb_end[1]) / 0.05j
+    i_feeder = (vb_end[1] - vb_end[2] / p_end["ratio"][0]) / (1j * p_end["x_xf"][0])
+    assert abs(i_line - i_feeder) < NET_TOL
+    assert abs(vb_end[3]) > abs(vb[3]) + 1e-3, "end-use shedding raises the load-bus voltage"
 
 
 # --------------------------------------------------------------------------- #

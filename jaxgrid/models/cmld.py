@@ -60,9 +60,10 @@ switches). Each is the InterPSS reading where one is known, which reproduces the
      difference of motor D's P at V_L0 from FmD·P_L is given to the static load (reported).
 Other choices: the voltage floor (spec §6 step 6) scales the feeder impedance down in
 steps of `floor_step` (InterPSS: 1 %) until |V_L| >= `v_floor`; the tap is not raised
-first. Every adjustment is in the load report. Shedding is end-use (spec §9): the
-slot's connected fraction scales every component and the load-end shunt; states are
-untouched. Feeder shedding is not implemented. CMLDBLU1 (132 CONs) has no Frcel; it is
+first. Every adjustment is in the load report. Shedding (spec §9, `shedding`) is end-use
+by default: the load-bus slot's connected fraction scales every component and the load-end
+shunt; states are untouched. "feeder" scales the whole feeder instead (`CmldFeederShed`).
+CMLDBLU1 (132 CONs) has no Frcel; it is
 taken as 0 (dropped electronic load does not come back) and reported. Below
 `STATIC_V_BREAK` the static load becomes a constant admittance (its value at the break),
 so a collapsed voltage never asks a constant-power part for full power.
@@ -90,6 +91,7 @@ STATIC_V_BREAK = 0.3  # p.u.: below it the static load is a constant admittance
 SECANT_STEPS = 60  # iterations of the Bf root find (converges in < 10)
 SECANT_TOL = 1e-13  # p.u. system base: reactive mismatch accepted at the load bus
 EXTRA_VAR = ("load_end", "none")
+SHEDDING = ("end_use", "feeder")
 
 
 class CompositeWarning(UserWarning):
@@ -106,15 +108,22 @@ class CompositeOptions:
       v_floor: p.u.; the initial load-bus voltage is raised to at least this by scaling the
         feeder impedance down (spec §6 step 6; WECC/InterPSS 0.95). 0 switches it off.
       floor_step: fraction of the given feeder impedance removed per adjustment (0.01).
+      shedding: "end_use" (default, spec §9): the load slot's connected fraction scales
+        every component and the load-end compensation; "feeder": it scales the whole feeder
+        (transformer, shunts, feeder and components) as seen from the system bus, which
+        then gets a load slot too (`CmldFeederShed`).
     """
 
     extra_var: str = "load_end"
     v_floor: float = 0.95
     floor_step: float = 0.01
+    shedding: str = "end_use"
 
     def __post_init__(self):
         if self.extra_var not in EXTRA_VAR:
             raise ValueError(f"extra_var = {self.extra_var!r}: allowed {', '.join(EXTRA_VAR)}")
+        if self.shedding not in SHEDDING:
+            raise ValueError(f"shedding = {self.shedding!r}: allowed {', '.join(SHEDDING)}")
         if not 0.0 <= self.v_floor < 1.5:
             raise ValueError(f"v_floor = {self.v_floor!r} p.u.: allowed [0, 1.5)")
         if not 0.0 < self.floor_step < 1.0:
@@ -334,7 +343,32 @@ class Cmldblu1(Cmldblu2):
         return p
 
 
+class CmldFeederShed(Cmldblu2):
+    """CMLDBLU1/2 with feeder shedding (spec §9): a shed fraction opens that share of
+    identical parallel feeders. The feeders left see the same voltages as the whole one, so
+    the components are not scaled; the system bus draws left × the whole feeder's current
+    ratio·(I_f + j·b_low·V_low), I_f the current into the load bus, V_low = V_L + z_f·I_f.
+    The network holds the whole feeder; (1 − left) of that current is injected back at the
+    system bus's load slot `p["upstream_slot"]`.
+    """
+
+    @classmethod
+    def shed_current(cls, p, x, z, v, left):
+        return cls.current(p, x, z, v)
+
+    @classmethod
+    def upstream_injection(cls, p, x, z, v, left):
+        i_f = cls.current(p, x, z, v)
+        v_low = v + (p["r_fdr"] + 1j * p["x_fdr"]) * i_f
+        return (1.0 - left) * p["ratio"] * (i_f + 1j * p["b_low"] * v_low)
+
+
 COMPOSITE_LOADS = {m.name: m for m in (Cmldblu2, Cmldblu1)}
+
+
+def run_model(options: CompositeOptions) -> type[Cmldblu2]:
+    """The class that runs every composite load unit under `options` (both record types)."""
+    return CmldFeederShed if options.shedding == "feeder" else Cmldblu2
 
 
 def _sub(tree: dict, prefix: str) -> dict:
@@ -400,6 +434,7 @@ class Expansion(NamedTuple):
       case: the expanded case (internal buses appended after the RAW buses).
       vm, va: (n_bus,) power-flow voltages of the expanded case, p.u., rad.
       load_bus: (n,) bus index of each unit's load bus in `case`.
+      system_bus: (n,) bus index of each unit's system (RAW) bus.
       params, states, flags: {name: (n,)} of the units (Cmldblu2 layout).
       s0: (n,) complex power each unit draws at its load bus, p.u. system base.
       labels: (n,) "file:line: MODEL at bus B id 'I'".
@@ -410,6 +445,7 @@ class Expansion(NamedTuple):
     vm: np.ndarray
     va: np.ndarray
     load_bus: np.ndarray
+    system_bus: np.ndarray
     params: dict
     states: dict
     flags: dict
@@ -493,7 +529,8 @@ def expand(case: Case, vm: np.ndarray, va: np.ndarray, records: Sequence[DyrReco
     v_new = v_new[order]
     return Expansion(case=expanded, vm=np.concatenate([vm, np.abs(v_new)]),
                      va=np.concatenate([va, np.angle(v_new)]),
-                     load_bus=expanded.bus_index(load_numbers), params=init.params,
+                     load_bus=expanded.bus_index(load_numbers), system_bus=bus,
+                     params=init.params,
                      states=init.states, flags=init.flags, s0=init.s0, labels=labels,
                      names=names)
 
