@@ -168,6 +168,20 @@ def test_initialised_at_rest_and_drawing_the_power_flow_load(system):
     assert abs(vb[3] - system.v0[3]) < NET_TOL, "load-bus voltage off its initial value"
 
 
+def test_interpss_reading_without_feeder_compensation_starts_at_rest(tmp_path, system):
+    model = build(tmp_path, record(CONS), composite=CompositeOptions(compensation="static_q"))
+    p, p_bf = model.loads[0].params, system.loads[0].params
+    assert p["bf"][0] == 0.0 and p["b_le"][0] == 0.0 and p_bf["bf"][0] != 0.0
+    assert p["p_st0"][0] == pytest.approx(0.164 * p["p_l"][0], rel=1e-12)
+    # the static load's Q is no longer P·tan(acos PFs): it closes the balance (spec §6)
+    assert abs(p["q_st0"][0] - p["p_st0"][0] * np.tan(np.arccos(0.997)) * -1) > 1e-3
+    rates, _, _ = derivatives(model, model.initial, network.fault_view(model.network, 0, 1.0),
+                              0.0)
+    worst = max(float(np.abs(np.asarray(r)).max()) for group in rates for d in group
+                for r in d.values())
+    assert worst < REST_TOL
+
+
 def test_load_report_names_the_initialisation(system):
     report = [n for n in system.notes if "CMLDBLU2 at bus 2" in n and "P_L" in n]
     assert len(report) == 1 and "tap 1.06250" in report[0], report

@@ -48,7 +48,8 @@ switches). Each is the InterPSS reading where one is known, which reproduces the
      same third-order model, so the choice does not change results.
   4. Bf is solved with Bss given: the whole reactive balance at the load bus is closed by
      Bf, split Fb to the low side and 1 − Fb to the load bus (spec §6 steps 3-5, a secant
-     root find). Extra-var removal (`extra_var`): "load_end" (default) removes, when a
+     root find; the issue asks for it). `compensation="static_q"` is InterPSS's reading
+     instead: no Bf, the static load's Q takes the mismatch. Extra-var removal (`extra_var`): "load_end" (default) removes, when a
      component trips or drops out, its initial-MW share of the load-end shunt (1 − Fb)·Bf;
      "none" keeps the shunt. Bss and Fb·Bf never take part (they sit at the low-side bus);
      a third reading with them is not implemented.
@@ -92,6 +93,7 @@ SECANT_STEPS = 60  # iterations of the Bf root find (converges in < 10)
 SECANT_TOL = 1e-13  # p.u. system base: reactive mismatch accepted at the load bus
 EXTRA_VAR = ("load_end", "none")
 SHEDDING = ("end_use", "feeder")
+COMPENSATION = ("bf", "static_q")
 
 
 class CompositeWarning(UserWarning):
@@ -103,6 +105,9 @@ class CompositeOptions:
     """Readings of the composite load where the specification leaves a choice (module doc).
 
     Attributes:
+      compensation: "bf" (default; spec §6 steps 3-5, WECC): the feeder compensation Bf
+        closes the reactive balance at the load bus; "static_q" (InterPSS, spec §6 last
+        paragraph): Bf = 0 and the static load's Q takes the mismatch.
       extra_var: "load_end" (default): a tripped component takes its initial-MW share of the
         load-end compensation (1 − Fb)·Bf with it; "none": the compensation stays.
       v_floor: p.u.; the initial load-bus voltage is raised to at least this by scaling the
@@ -114,6 +119,7 @@ class CompositeOptions:
         then gets a load slot too (`CmldFeederShed`).
     """
 
+    compensation: str = "bf"
     extra_var: str = "load_end"
     v_floor: float = 0.95
     floor_step: float = 0.01
@@ -122,6 +128,9 @@ class CompositeOptions:
     def __post_init__(self):
         if self.extra_var not in EXTRA_VAR:
             raise ValueError(f"extra_var = {self.extra_var!r}: allowed {', '.join(EXTRA_VAR)}")
+        if self.compensation not in COMPENSATION:
+            raise ValueError(f"compensation = {self.compensation!r}: allowed "
+                             f"{', '.join(COMPENSATION)}")
         if self.shedding not in SHEDDING:
             raise ValueError(f"shedding = {self.shedding!r}: allowed {', '.join(SHEDDING)}")
         if not 0.0 <= self.v_floor < 1.5:
@@ -677,6 +686,8 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
         return s_l.imag - s_l.real * sum(comp.values()).imag
 
     def solve_bf(scale):
+        if options.compensation == "static_q":
+            return np.zeros(n)
         b0, b1 = np.zeros(n), 0.1 * s.real
         g0 = mismatch(b0, scale)
         for _ in range(SECANT_STEPS):
@@ -714,6 +725,8 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
     comp, (pd, _, zd, s_d, d_notes), slips = _components(
         p, share, consts, vmag, p_l, sbase, f_nom, motors, labels)
     notes.extend(d_notes)
+    if options.compensation == "static_q":  # the static load's Q closes the balance
+        comp["st"] = comp["st"] + 1j * (s_l.imag - sum(comp.values()).imag)
     params, states = dict(p), {}
     b_le = (1.0 - p["fb"]) * bf
     y_norton = pd["y_norton"] + np.conj(comp["el"] + comp["st"]) / vmag ** 2 + 1j * b_le
