@@ -19,12 +19,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid import network
-from jaxgrid.case import ISOLATED, Case
+from jaxgrid.case import ISOLATED, PQ, Case
 from jaxgrid.dynamics import derivatives, update_loads
 from jaxgrid.grid import DeviceGroup, GridModel, GridState
 from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
 from jaxgrid.models.acmotor import LOAD_MOTORS, MotorOptions
 from jaxgrid.models.base import ExciterInputs, LoadSite, ModelError, device_label
+from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, expand, run_model
 from jaxgrid.models.exciters import EXCITERS
 from jaxgrid.models.governors import GOVERNORS
 from jaxgrid.models.induction import INDUCTION_MOTORS
@@ -33,7 +34,8 @@ from jaxgrid.models.machines import MACHINES
 from jaxgrid.powerflow import PowerFlowResult, admittance_matrix, bus_loads, solve
 
 LOAD_MODELS = {**LOAD_MOTORS, **INDUCTION_MOTORS}
-SUPPORTED = tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS) + tuple(LOAD_MODELS)
+SUPPORTED = (tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS) + tuple(LOAD_MODELS)
+             + tuple(COMPOSITE_LOADS))
 
 # What replaces a model that is not supported, by kind (lenient mode).
 _FALLBACK = {
@@ -78,6 +80,7 @@ class CompileOptions:
       load_buses: RAW bus numbers whose load can be changed (load shedding); None: every
         bus with an in-service load. Buses with a load model always get a slot.
       motors: readings of motor-load data where reference simulators disagree.
+      composite: readings of the WECC composite load (CMLDBLU1/2) data.
       precision: "float32" (default time loop) or "float64".
       sweeps: fixed-point sweeps per network solution (>= 1).
       init_tolerance: largest |derivative| at t = 0 accepted without an InitWarning.
@@ -87,6 +90,7 @@ class CompileOptions:
     loads: LoadSplit = LoadSplit()
     load_buses: tuple[int, ...] | None = None
     motors: MotorOptions = MotorOptions()
+    composite: CompositeOptions = CompositeOptions()
     precision: str = "float32"
     sweeps: int = 2
     init_tolerance: float = 1e-5
@@ -102,20 +106,28 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
                   pf: PowerFlowResult | None = None) -> GridModel:
     """A GridModel for `case` at its power-flow point with the dynamic models of `dyr`.
 
+    Composite loads (CMLDBLU1/2) first add their low-side and load buses to the case
+    (`jaxgrid.models.cmld.expand`); the model's buses are then the RAW buses followed by
+    those internal buses, named in `GridModel.bus_names`.
+
     Raises DyrError (unsupported models, strict) or ModelError (bad CONs, naming file,
     line, device and field); warns InitWarning when a device does not start at rest.
     """
     pf = solve(case) if pf is None else pf
     notes: list[str] = []
+    records = _classify(dyr, *_unit_keys(case), options.strict, notes)
+    composite = [r for r in records["load"] if r.model in COMPOSITE_LOADS]
+    records["load"] = [r for r in records["load"] if r.model not in COMPOSITE_LOADS]
+    names = {}
+    if composite:
+        grown = expand(case, pf.vm, pf.va, composite, options.composite, options.motors, notes)
+        case, names = grown.case, grown.names
+        pf = dataclasses.replace(pf, case=case, vm=grown.vm, va=grown.va, bus_kind=np.concatenate(
+            [pf.bus_kind, np.full(len(grown.vm) - len(pf.vm), PQ)]))
     v0 = pf.vm * np.exp(1j * pf.va)
     gen = case.generators
     on = gen.in_service & (case.buses.kind[gen.bus] != ISOLATED)
-    keys = {(int(case.buses.number[gen.bus[k]]), gen.gen_id[k].strip().upper()): int(k)
-            for k in np.flatnonzero(on)}
-    loads = case.loads
-    load_keys = {(int(case.buses.number[loads.bus[k]]), loads.load_id[k].strip().upper()): int(k)
-                 for k in np.flatnonzero(loads.in_service)}
-    records = _classify(dyr, keys, load_keys, options.strict, notes)
+    keys, load_keys = _unit_keys(case)
     groups = _machine_groups(case, records["machine"], keys, options.strict, notes)
     order = np.array([u for _, units, _ in groups for u in units], dtype=int)
     position = {int(g): k for k, g in enumerate(order)}
@@ -150,6 +162,13 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     s_load = _bus_load_at(case, pf)
     motors = _load_model_groups(case, pf, s_load.real, records["load"], load_keys, options,
                                 notes)
+    upstream = np.zeros(0, dtype=int)
+    if composite:
+        motors.append(LoadModelUnits(run_model(options.composite), grown.labels,
+                                     grown.load_bus, grown.params, grown.states, grown.flags,
+                                     grown.s0))
+        if options.composite.shedding == "feeder":  # the system buses get load slots too
+            upstream = grown.system_bus
     s_static = s_load.copy()
     for m in motors:
         np.add.at(s_static, m.buses, -m.s0)
@@ -159,9 +178,12 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     np.add.at(y, (gen.bus[order], gen.bus[order]), y_norton)
     for m in motors:
         np.add.at(y, (m.buses, m.buses), m.params["y_norton"])
-    load_bus = _load_buses(case, s_load, options, [b for m in motors for b in m.buses])
+    load_bus = _load_buses(case, s_load, options,
+                           [b for m in motors for b in m.buses] + upstream.tolist())
     slot_bus = np.concatenate([gen.bus[order], load_bus]).astype(int)
     slot_of = {int(b): k for k, b in enumerate(load_bus)}
+    if upstream.size:
+        motors[-1].params["upstream_slot"] = np.array([slot_of[int(b)] for b in upstream])
     load_groups = tuple(
         DeviceGroup(params=m.params, model=m.model, index=tuple(slot_of[int(b)] for b in m.buses),
                     labels=m.labels) for m in motors)
@@ -177,6 +199,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
                           load_flags=tuple(m.flags for m in motors),
                           load_left=np.ones(len(load_bus)), v=v0[slot_bus]),
         bus_numbers=tuple(int(b) for b in case.buses.number),
+        bus_names=tuple(names.get(int(b), f"Bus{b}") for b in case.buses.number),
         gen_bus=tuple(int(case.buses.number[gen.bus[g]]) for g in order),
         gen_id=tuple(gen.gen_id[g].strip() for g in order),
         slot_bus=tuple(int(b) for b in slot_bus), load_bus=tuple(int(b) for b in load_bus),
@@ -206,6 +229,17 @@ def with_precision(model: GridModel, precision: str) -> GridModel:
 
 def _key(record: DyrRecord) -> tuple[int, str]:
     return record.bus, record.device_id.strip().upper()
+
+
+def _unit_keys(case: Case) -> tuple[dict, dict]:
+    """{(bus number, ID): index} of in-service machines (on live buses) and loads."""
+    gen, loads, number = case.generators, case.loads, case.buses.number
+    on = gen.in_service & (case.buses.kind[gen.bus] != ISOLATED)
+    keys = {(int(number[gen.bus[k]]), gen.gen_id[k].strip().upper()): int(k)
+            for k in np.flatnonzero(on)}
+    load_keys = {(int(number[loads.bus[k]]), loads.load_id[k].strip().upper()): int(k)
+                 for k in np.flatnonzero(loads.in_service)}
+    return keys, load_keys
 
 
 def _kind(name: str) -> str:

@@ -37,7 +37,8 @@ def load_injection(model: GridModel, x: GridState, v_load):
     """(n_load,) current injected at the load slots at voltages v_load (n_load,), p.u.
 
     Static ZIP parts plus, per load model, its Norton correction y_norton·V − left·I(V)
-    (the Norton admittance itself sits in the network matrix).
+    (the Norton admittance itself sits in the network matrix; `LoadModel.shed_current`),
+    and any current a model injects at a second slot (`LoadModel.upstream_injection`).
     """
     left = x.load_left
     total = loads.injection(v_load, left, model.load_y, model.load_s_i, model.load_s_p,
@@ -45,8 +46,11 @@ def load_injection(model: GridModel, x: GridState, v_load):
     for g, xs, zs in zip(model.loads, x.loads, x.load_flags):
         k = _index(g)
         v = v_load[k]
-        drawn = left[k] * g.model.current(g.params, xs, zs, v)
+        drawn = g.model.shed_current(g.params, xs, zs, v, left[k])
         total = total.at[k].add(g.params["y_norton"] * v - drawn)
+        upstream = g.model.upstream_injection(g.params, xs, zs, v, left[k])
+        if upstream is not None:
+            total = total.at[g.params["upstream_slot"]].add(upstream)
     return total
 
 

@@ -92,6 +92,9 @@ class GridModel:
       sweeps: fixed-point sweeps per network solution (static).
       precision: "float32" or "float64" (static).
       notes: static tuple of strings: what the compiler changed, dropped or warned about.
+      bus_names: static name per bus (n_bus,): "Bus<N>" for RAW bus N, and for the internal
+        buses of a composite load at bus N "Bus<N>_lowBus" / "Bus<N>_loadBus" (the PNNL
+        task files' names; numbering in `jaxgrid.models.cmld`). Empty: all "Bus<N>".
     """
 
     machines: tuple[DeviceGroup, ...]
@@ -121,6 +124,7 @@ class GridModel:
     sweeps: int = struct.field(pytree_node=False)
     precision: str = struct.field(pytree_node=False)
     notes: tuple[str, ...] = struct.field(pytree_node=False)
+    bus_names: tuple[str, ...] = struct.field(pytree_node=False, default=())
 
     @property
     def n_bus(self) -> int:
@@ -137,6 +141,24 @@ class GridModel:
             raise ValueError(f"bus {bus_number} has no controllable load slot "
                              f"(buses with one: {[self.bus_numbers[b] for b in self.load_bus]})")
         return self.load_bus.index(index)
+
+    def bus_number_by_name(self, name: str) -> int:
+        """Bus number of a name (case-insensitive): an entry of `bus_names` such as
+        "Bus20_loadBus", or "Bus<N>" for any bus number N of the model; ValueError if none."""
+        key = name.strip().lower()
+        for bus_name, number in zip(self.bus_names, self.bus_numbers):
+            if bus_name.lower() == key:
+                return number
+        head, digits = key[:3], key[3:]
+        if head == "bus" and digits.lstrip("-").isdigit() and int(digits) in self.bus_numbers:
+            return int(digits)
+        raise ValueError(f"bus name {name!r} is not in the model (names are 'Bus<N>' and the "
+                         "composite loads' 'Bus<N>_loadBus' / 'Bus<N>_lowBus')")
+
+    def bus_index_by_name(self, name: str) -> int:
+        """Index (into bus_numbers, trajectories' bus axis) of a bus name; see
+        `bus_number_by_name`."""
+        return self.bus_index(self.bus_number_by_name(name))
 
     def bus_index(self, bus_number: int) -> int:
         """Index of a RAW bus number; ValueError naming the bus if unknown."""

@@ -3,7 +3,9 @@
 Strict mode throughout: every dynamic model of these files is supported. The checks are
 the study's: a motor bus still below the recovery level some seconds after clearing
 (FIDVR), none without a fault, and load shedding after the fault speeds recovery.
-Run with -s to print the voltages each reading of the motor data gives.
+Run with -s to print the voltages each reading of the motor data gives. The InterPSS-era
+variant with WECC composite loads (CMLDBLU2) is tested in test_cmld.py and measured by
+experiments/bench_cmld.py.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import numpy as np
 import pytest
 
 from jaxgrid.compile import CompileOptions, compile_model
-from jaxgrid.io.dyr import DyrError, read_dyr
+from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import RawWarning, read_raw
 from jaxgrid.models.acmotor import MotorOptions
 from jaxgrid.simulate import FaultEvent, LoadChange, make_task, simulate_batch, stack_tasks
@@ -107,11 +109,3 @@ def test_ieee300_training_faults_show_delayed_recovery(ieee300):
           {(f.bus if f else None): int(n) for f, n in zip(faults, low)})
     assert low[0] == 0, "an action bus is below the recovery level without a fault"
     assert low[1:].max() > 0, "no training fault leaves delayed recovery"
-
-
-def test_composite_load_variant_is_reported_unsupported(shared_cases):
-    case, dyr = _read(shared_cases, "ieee300/IEEE300Bus_modified_noHVDC_v2.raw",
-                      "ieee300/IEEE300_dyn_cmld_zone1.dyr")
-    with pytest.raises(DyrError, match=r"unsupported dynamic models: CMLDBLU2 x47 \(first at "
-                                       r"line \d+\): the load stays a static ZIP load"):
-        compile_model(case, dyr)

@@ -258,6 +258,19 @@ class LoadModel(DeviceModel):
         raise NotImplementedError
 
     @classmethod
+    def shed_current(cls, p: Params, x: States, z: States, v: Array, left: Array) -> Array:
+        """(n,) current drawn at the unit's slot when the fraction `left` (n,) of its load
+        is connected: left·current (end-use shedding)."""
+        return left * cls.current(p, x, z, v)
+
+    @classmethod
+    def upstream_injection(cls, p: Params, x: States, z: States, v: Array,
+                           left: Array) -> Array | None:
+        """(n,) current injected at the load slots p["upstream_slot"] (n,) int, or None (no
+        second slot; the default)."""
+        return None
+
+    @classmethod
     def derivative(cls, p: Params, x: States, z: States, v: Array) -> States:
         """Rates of the continuous states at bus voltage v (n,) complex."""
         return {}

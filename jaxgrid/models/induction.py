@@ -342,13 +342,23 @@ def motor_constants(p: dict, omega_b, stiff_below: float) -> dict[str, np.ndarra
         tpp0 = np.where(type2, x2 * (x1 + xm) / (x2 + x1 + xm) / (omega_b * r1),
                         (x2 + x1m) / (omega_b * r2))
         tpp0 = np.where(cage2, tpp0, 0.0)
+    return transient_constants(xa + xm, lp, lpp, xa, tp0, tpp0, cage2, stiff_below)
+
+
+def transient_constants(ls, lp, lpp, ll, tp0, tpp0, cage2, stiff_below: float):
+    """The §4 constants from reactances Ls, L', L'', Ll (p.u.) and T'0, T''0 (s), arrays (n,).
+
+    cage2 (n,) bool: a second cage is given. It is dropped (L'' := L', k3 = k4 = 0, k5 = 1,
+    double = 0) when T''0 < stiff_below (s), the stiff-stage rule of spec §6.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
         double = cage2 & (tpp0 >= stiff_below)
         lpp = np.where(double, lpp, lp)
-        span = np.where(double, lp - xa, 1.0)
+        span = np.where(double, lp - ll, 1.0)
         k3 = np.where(double, (lp - lpp) / span ** 2, 0.0)
         k4 = np.where(double, (lp - lpp) / span, 0.0)
-        k5 = np.where(double, (lpp - xa) / span, 1.0)
-    return {"ls": xa + xm, "lp": lp, "lpp": lpp, "ll": xa, "tp0": tp0,
+        k5 = np.where(double, (lpp - ll) / span, 1.0)
+    return {"ls": ls, "lp": lp, "lpp": lpp, "ll": ll, "tp0": tp0,
             "tpp0": np.where(double, tpp0, 0.0), "k3": k3, "k4": k4, "k5": k5,
             "double": double.astype(float)}
 
