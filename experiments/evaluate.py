@@ -81,8 +81,7 @@ def task_specs(study: Study, tasks: str):
     from jaxgrid.io.pnnl import read_task_config
 
     config = read_task_config(tasks)
-    case = study.points[0].case
-    buses = tuple(bus_number(n, case, config.source, "faultBusCandidates")
+    buses = tuple(bus_number(n, study.buses, config.source, "faultBusCandidates")
                   for n in config.fault_buses)
     return TaskSet(buses, config.fault_durations, config.fault_starts).specs(study.n_points)
 

@@ -56,6 +56,7 @@ from jaxgrid.io import pnnl
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.models.acmotor import MotorOptions
+from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, internal_buses
 from jaxgrid.models.loads import LoadSplit
 from jaxgrid.powerflow import bus_loads
 from jaxgrid.simulate import Bounds
@@ -95,6 +96,7 @@ class CompileSettings:
     sweeps: int = 2
     motors: MotorOptions = MotorOptions()
     loads: LoadSplit = LoadSplit()
+    composite: CompositeOptions = CompositeOptions()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,18 +133,38 @@ class OperatingPoint:
 
 
 @dataclasses.dataclass(frozen=True)
+class BusTable:
+    """The buses a study file can name, before compiling: the RAW buses and the composite
+    loads' internal buses (`jaxgrid.models.cmld.internal_buses`).
+
+    Attributes:
+      source: the case.  number: {lower-case name: bus number} ("bus504",
+        "bus20_loadbus").  zone, base_kv, loaded: per bus number (loaded: an in-service
+        RAW load, the composite loads' load buses).
+    """
+
+    source: str
+    number: dict
+    zone: dict
+    base_kv: dict
+    loaded: dict
+
+
+@dataclasses.dataclass(frozen=True)
 class Study:
     """A load-shedding study (module docstring).
 
     Attributes:
       definition: what rebuilds it.  points: the operating points.
       models: the compiled points stacked, every array leaf with a leading (n_points,) axis.
+      buses: the names study files can use for its buses (`bus_number`).
       notes: what the readers and checks reported (unused keys, count mismatches, ...).
     """
 
     definition: StudyDefinition
     points: tuple[OperatingPoint, ...]
     models: GridModel
+    buses: BusTable
     notes: tuple[str, ...]
 
     @property
@@ -313,11 +335,11 @@ def build(grid: GridSource, name: str | None = None,
     for key in ("observed_buses", "action_buses"):
         if key not in env_values:
             raise ValueError(f"study: no {key}: give a task_config or [env] {key}")
-    case = points[0][2]
     env_values["action_buses"] = tuple(env_values["action_buses"])
     options = CompileOptions(strict=compile.strict, loads=compile.loads,
                              load_buses=env_values["action_buses"], motors=compile.motors,
-                             precision=compile.precision, sweeps=compile.sweeps)
+                             composite=compile.composite, precision=compile.precision,
+                             sweeps=compile.sweeps)
     models = [compile_model(c, dyr, options) for _, _, c in points]
     stacked = stack_models(models, [source for _, source, _ in points])
     config = EnvConfig(**env_values)
@@ -335,14 +357,17 @@ def build(grid: GridSource, name: str | None = None,
     definition = StudyDefinition(
         name=name or defaults["name"], grid=grid, compile=compile, env=config,
         params=EnvParams(**{**defaults["params"], **(params or {})}), tasks=task_sets)
+    buses = defaults.get("buses") or bus_table(points[0][2], dyr)
     if defaults.get("pnnl_task"):
-        notes.extend(_pnnl_checks(defaults["pnnl_task"], config, case, models[0]))
+        notes.extend(_pnnl_checks(defaults["pnnl_task"], config, buses, models[0],
+                                  points[0][2].base_mva))
     if notes:
         warnings.warn(f"study {definition.name!r}: {len(notes)} note(s), in Study.notes: "
                       + "; ".join(notes), StudyWarning, stacklevel=2)
     ops = tuple(OperatingPoint(label, source, c, m.notes)
                 for (label, source, c), m in zip(points, models))
-    return Study(definition=definition, points=ops, models=stacked, notes=tuple(notes))
+    return Study(definition=definition, points=ops, models=stacked, buses=buses,
+                 notes=tuple(notes))
 
 
 def _builtin_points(grid: GridSource):
@@ -381,24 +406,27 @@ def _file_points(grid: GridSource, notes: list[str]):
             raise ValueError(f"{path} and {first_path} are not one grid: {difference}")
     defaults = {"name": Path(grid.task_config or grid.raw[0]).stem, "env": {}, "params": {},
                 "tasks": {}}
-    case = points[0][2]
+    dyr = read_dyr(grid.dyr)
     if grid.task_config:
+        buses = bus_table(points[0][2], dyr)
         task = pnnl.read_task_config(grid.task_config)
         notes.extend(f"{task.source}: {n}" for n in task.notes)
         notes.extend(f"{task.source}: key {k!r} is not understood and was not used"
                      for k in task.unknown)
-        action = _scope(task.action_scope, task.action, case, task.source, "actionScopeAry")
-        observed = _scope(task.observation_scope, task.observed, case, task.source,
+        action = _scope(task.action_scope, task.action, buses, task.source, "actionScopeAry")
+        observed = _scope(task.observation_scope, task.observed, buses, task.source,
                           "observationScopeAry", min_kv=task.observed_min_kv)
         if task.observation_scope == "Zone":
             observed = observed + tuple(b for b in action if b not in observed)
-        fault_buses = tuple(bus_number(n, case, task.source, "faultBusCandidates")
+        fault_buses = tuple(bus_number(n, buses, task.source, "faultBusCandidates")
                             for n in task.fault_buses)
-        defaults.update(name=task.name, params=dict(task.params), pnnl_task=task, env={
-            "observed_buses": observed, "action_buses": action, "agent_dt": task.agent_dt,
-            "history": task.history, "include_action_status": task.include_action_status},
-            tasks={"train": {"fault_buses": fault_buses, "fault_starts": task.fault_starts,
-                             "fault_durations": task.fault_durations}})
+        defaults.update(name=task.name, params=dict(task.params), pnnl_task=task, buses=buses,
+                        env={"observed_buses": observed, "action_buses": action,
+                             "agent_dt": task.agent_dt, "history": task.history,
+                             "include_action_status": task.include_action_status},
+                        tasks={"train": {"fault_buses": fault_buses,
+                                         "fault_starts": task.fault_starts,
+                                         "fault_durations": task.fault_durations}})
     if grid.sim_config:
         sim = pnnl.read_sim_config(grid.sim_config)
         notes.extend(f"{sim.source}: {n}" for n in sim.notes)
@@ -407,40 +435,57 @@ def _file_points(grid: GridSource, notes: list[str]):
         defaults["env"].update(dt=sim.dt, episode=sim.t_end)
         if sim.fault_r is not None and "train" in defaults["tasks"]:
             defaults["tasks"]["train"].update(fault_r=sim.fault_r, fault_x=sim.fault_x)
-    return points, read_dyr(grid.dyr), defaults
+    return points, dyr, defaults
 
 
-_BUS_NAME = re.compile(r"bus(\d+)", re.IGNORECASE)
+def bus_table(case: Case, dyr) -> BusTable:
+    """The BusTable of `case` with the composite loads of `dyr`."""
+    numbers = [int(n) for n in case.buses.number]
+    names = {f"bus{n}": n for n in numbers}
+    zone = dict(zip(numbers, (int(z) for z in case.buses.zone)))
+    kv = dict(zip(numbers, (float(v) for v in case.buses.base_kv)))
+    loaded = dict(zip(numbers, (bool(x) for x in np.abs(sum(bus_loads(case))) > 0)))
+    composite = [r for r in dyr.records if r.model in COMPOSITE_LOADS]
+    for record, ((low, low_name), (load, load_name)) in zip(
+            composite, internal_buses(case, composite)):
+        for number, name, base_kv in ((low, low_name, 0.0), (load, load_name, kv[record.bus])):
+            names[name.lower()], zone[number], kv[number] = number, zone[record.bus], base_kv
+            loaded[number] = number == load
+    return BusTable(case.source, names, zone, kv, loaded)
 
 
-def bus_number(name, case: Case, source: str, key: str) -> int:
-    """The RAW number of a PNNL bus reference ("Bus504", "bus20001", 504)."""
-    match = _BUS_NAME.fullmatch(str(name).strip()) or re.fullmatch(r"(\d+)", str(name).strip())
+def bus_number(name, buses: BusTable, source: str, key: str) -> int:
+    """The number of a PNNL bus reference ("Bus504", "bus20001", "Bus20_loadBus", 504)."""
+    text = str(name).strip()
+    number = buses.number.get(text.lower())
+    if number is not None:
+        return number
+    if re.fullmatch(r"bus-?\d+_\w+", text, re.IGNORECASE):
+        raise ValueError(f"{source}: {key}: {name!r}: the case {buses.source} has no such "
+                         "internal bus (no composite load record there in the DYR)")
+    match = re.fullmatch(r"(?:bus)?(-?\d+)", text, re.IGNORECASE)
     if not match:
-        raise ValueError(f"{source}: {key}: {name!r} is not a bus reference ('Bus<number>')")
-    number = int(match.group(1))
-    if number not in set(int(n) for n in case.buses.number):
-        raise ValueError(f"{source}: {key}: {name!r}: the case {case.source} has no bus "
-                         f"{number}")
-    return number
+        raise ValueError(f"{source}: {key}: {name!r} is not a bus reference ('Bus<number>' "
+                         "or a composite load's 'Bus<number>_loadBus')")
+    if int(match.group(1)) in buses.zone:
+        return int(match.group(1))
+    raise ValueError(f"{source}: {key}: {name!r}: the case {buses.source} has no bus "
+                     f"{match.group(1)}")
 
 
-def _scope(kind: str, entries, case: Case, source: str, key: str, min_kv: float = 0.0):
+def _scope(kind: str, entries, buses: BusTable, source: str, key: str, min_kv: float = 0.0):
     """Bus numbers of a "Bus" scope (the names) or a "Zone" scope (observations: the zones'
-    buses above min_kv; actions: the zones' buses with an in-service load)."""
+    buses above min_kv; actions: the zones' buses with a load)."""
     if kind == "Bus":
-        return tuple(bus_number(n, case, source, key) for n in entries)
+        return tuple(bus_number(n, buses, source, key) for n in entries)
     zones = []
     for z in entries:
-        if not str(z).strip().isdigit() or int(z) not in set(int(v) for v in case.buses.zone):
-            raise ValueError(f"{source}: {key}: zone {z!r} is not a zone of {case.source}")
+        if not str(z).strip().isdigit() or int(z) not in set(buses.zone.values()):
+            raise ValueError(f"{source}: {key}: zone {z!r} is not a zone of {buses.source}")
         zones.append(int(z))
-    in_zone = np.isin(case.buses.zone, zones)
-    if key == "actionScopeAry":
-        chosen = in_zone & (np.abs(sum(bus_loads(case))) > 0)
-    else:
-        chosen = in_zone & (case.buses.base_kv > min_kv)
-    return tuple(int(b) for b in case.buses.number[chosen])
+    keep = (lambda b: buses.loaded[b]) if key == "actionScopeAry" else \
+        (lambda b: buses.base_kv[b] > min_kv)
+    return tuple(b for b, z in buses.zone.items() if z in zones and keep(b))
 
 
 def _check_buses(buses, model: GridModel, key: str) -> None:
@@ -449,13 +494,13 @@ def _check_buses(buses, model: GridModel, key: str) -> None:
         raise ValueError(f"study: {key}: buses {missing} are not in the case")
 
 
-def _pnnl_checks(task: pnnl.PnnlTask, config: EnvConfig, case: Case, model: GridModel):
+def _pnnl_checks(task: pnnl.PnnlTask, config: EnvConfig, buses: BusTable, model: GridModel,
+                 base_mva: float):
     """Notes where the resolved buses or loads differ from the file's own counts."""
     notes = []
     zones = {int(z) for z in task.observed} if task.observation_scope == "Zone" else None
     if zones is not None:
-        zone_of = dict(zip((int(b) for b in case.buses.number), case.buses.zone))
-        kv_of = dict(zip((int(b) for b in case.buses.number), case.buses.base_kv))
+        zone_of, kv_of = buses.zone, buses.base_kv
         inside = [b for b in config.observed_buses if zone_of[b] in zones]
         found = {"ObservationSelfZoneVoltNum": len(inside),
                  "ObservationSelfZoneLowVoltNum": sum(kv_of[b] <= task.observed_min_kv
@@ -468,7 +513,7 @@ def _pnnl_checks(task: pnnl.PnnlTask, config: EnvConfig, case: Case, model: Grid
                   for k, v in task.counts.items() if found[k] != v]
     if task.action_p_mw is not None:
         slots = [model.load_slot(b) for b in config.action_buses]
-        mw = np.asarray(model.load_p0)[slots] * case.base_mva
+        mw = np.asarray(model.load_p0)[slots] * base_mva
         notes += [f"{task.source}: actionBusesPValue: bus {b} {want:g} MW, the case has "
                   f"{have:.2f} MW" for b, want, have in zip(config.action_buses,
                                                              task.action_p_mw, mw)
@@ -580,7 +625,8 @@ def _table(value, path, key) -> dict:
     return value
 
 
-_NESTED = {"MotorOptions": MotorOptions, "LoadSplit": LoadSplit, "Bounds": Bounds}
+_NESTED = {"MotorOptions": MotorOptions, "LoadSplit": LoadSplit, "Bounds": Bounds,
+           "CompositeOptions": CompositeOptions}
 
 
 def _fields(cls, values, path, key) -> dict:
