@@ -241,3 +241,20 @@ def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):
     assert set(data["params"]) == {f.name for f in dataclasses.fields(EnvParams)}
     assert all(p.startswith("/") for p in data["grid"]["raw"]), "absolute paths"
     assert "builtin" not in data["grid"] and len(data["grid"]["raw"]) == 3
+
+
+def test_the_papers_300_bus_system_from_its_files(shared_cases):
+    """The InterPSS-era 300-bus files with their composite loads: the task JSON's
+    "Bus<N>_loadBus" action buses resolve to the composite loads' load buses, and the zone-1
+    scope gives the paper's 154 observed buses and 200 inputs."""
+    folder = shared_cases / "ieee300"
+    task = folder / ("IEEE300_RL_loadShedding_zone1_continuous_LSTM_new_lessfaultbuses_"
+                     "moreActionBuses_multipfcases.json")
+    study = from_files(folder / "IEEE300Bus_modified_noHVDC_v2.raw",
+                       folder / "IEEE300_dyn_cmld_zone1.dyr", task)
+    config, model = study.config, study.point(0)
+    assert (len(config.observed_buses), len(config.action_buses), study.env().obs_size) == (
+        154, 46, 200)
+    names = json.loads(task.read_text())["actionScopeAry"]
+    assert [model.bus_names[model.bus_index(b)] for b in config.action_buses] == names
+    assert not [n for n in study.notes if "but the case gives" in n]
