@@ -23,6 +23,7 @@ bench:  ## benchmarks; figures go to bench_results/*.json
 		--batch-sizes 1 8 64 512 2048 --out bench_results/sim_fidvr.json
 	$(PY) -m experiments.bench_env --out bench_results/env.json
 	$(PY) -m experiments.bench_train --out bench_results/train.json
+	$(PY) -m experiments.bench_cmld --out bench_results/cmld.json
 
 clean:
 	rm -rf $(VENV) results bench_results .pytest_cache

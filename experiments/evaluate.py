@@ -49,7 +49,7 @@ def check_layout(control: str, info: dict, study: Study, env: LoadSheddingEnv) -
     from experiments.train import layout
 
     trained = info.get("layout")
-    here = layout(study, env.config)
+    here = layout(env.config)
     if trained is not None and trained != here:
         raise ValueError(f"{control} (trained on study {info.get('study')!r}) has the layout "
                          f"{trained}; study {study.name!r} has {here}")

@@ -87,14 +87,16 @@ def main(argv: list[str] | None = None, defaults: dict = DEFAULTS) -> int:
 
 
 class Trainer(NamedTuple):
-    """What `build` makes: iteration(state, tasks, data), the policy and its spec, and the
-    arguments the iteration takes (tasks: PointTask batch, data: the stacked grid models)."""
+    """What `build` makes: iteration(state, tasks, data), the policy and its spec, the
+    arguments the iteration takes (tasks: PointTask batch, data: the stacked grid models),
+    and the environment's configuration (history and episode as trained)."""
 
     iteration: object
     policy: object
     spec: object
     tasks: object
     data: object
+    env_config: object
 
 
 def build(study, policy_kind: str, hidden: tuple[int, ...], config, history: int | None = None,
@@ -117,10 +119,11 @@ def build(study, policy_kind: str, hidden: tuple[int, ...], config, history: int
                                  config.tasks_per_iteration)
               if sampling == "stratified" else None)
     iteration = make_iteration(point_episode(env, params), policy, config, sample, mesh)
-    return Trainer(iteration, policy, spec, study.batch(study.tasks(task_set)), study.models)
+    return Trainer(iteration, policy, spec, study.batch(study.tasks(task_set)), study.models,
+                   env.config)
 
 
-def layout(study, env_config) -> dict:
+def layout(env_config) -> dict:
     """What a saved policy observes and acts on (checked when it is evaluated)."""
     return {"observed_buses": list(env_config.observed_buses),
             "action_buses": list(env_config.action_buses), "history": env_config.history,
@@ -154,12 +157,10 @@ def _train(args) -> int:
                          f"{mgr.latest_step()}, past --iterations {args.iterations}")
     trainer = build(study, args.policy, hidden, config, args.history, args.episode,
                     args.task_set, args.task_sampling)
-    env_config = study.env(**{k: v for k, v in (("history", args.history),
-                                                 ("episode", args.episode))
-                              if v is not None}).config
+    env_config = trainer.env_config
     run_info = {"study": study.name, "points": [p.label for p in study.points],
                 "task_set": args.task_set, "task_sampling": args.task_sampling,
-                "layout": layout(study, env_config), "history": env_config.history,
+                "layout": layout(env_config), "history": env_config.history,
                 "episode": env_config.episode, "config": dataclasses.asdict(config)}
     state, log = init_state(trainer.policy, config), []
     if args.resume:
