@@ -309,10 +309,10 @@ def builtin(case: str, load_levels=(1.0,), **overrides) -> Study:
 def from_files(raw, dyr, task_config=None, sim_config=None, **overrides) -> Study:
     """A study from RAW files (operating points), a DYR and PNNL JSON files."""
     raw = [raw] if isinstance(raw, (str, Path)) else list(raw)
-    return build(GridSource(raw=tuple(str(Path(r).absolute()) for r in raw),
-                            dyr=str(Path(dyr).absolute()),
-                            task_config=task_config and str(Path(task_config).absolute()),
-                            sim_config=sim_config and str(Path(sim_config).absolute())),
+    return build(GridSource(raw=tuple(str(Path(r).resolve()) for r in raw),
+                            dyr=str(Path(dyr).resolve()),
+                            task_config=task_config and str(Path(task_config).resolve()),
+                            sim_config=sim_config and str(Path(sim_config).resolve())),
                  **overrides)
 
 
