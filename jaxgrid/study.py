@@ -36,6 +36,7 @@ reading it back gives the identical definition.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import glob
 import re
 import tomllib
@@ -248,16 +249,23 @@ def rollout_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_param
     shape = (len(points), len(groups[0]))
     tasks = jax.tree.map(lambda a: a.reshape(shape + a.shape[1:]), study.batch(ordered).task)
     models = jax.tree.map(lambda a: a[np.array(points)], study.models)
-
-    def run(models, tasks, policy_params, policy_carry):
-        return jax.vmap(lambda grid, task: env.rollout(
-            policy_apply, policy_params, task, study.params, grid, policy_carry, trace))(
-                models, tasks)
-
     with jax.enable_x64(env.precision == "float64"):
-        out = jax.jit(run)(models, tasks, policy_params, policy_carry)
+        out = _points_rollout(env, policy_apply, trace)(models, tasks, study.params,
+                                                        policy_params, policy_carry)
     out = jax.tree.map(lambda a: np.asarray(a).reshape((len(ordered),) + a.shape[2:]), out)
     return ordered, out
+
+
+@functools.lru_cache(maxsize=32)
+def _points_rollout(env: LoadSheddingEnv, policy_apply, trace: bool):
+    """jit of `env.rollout` vmapped over operating points (models and tasks batched), one
+    per (env, policy, trace), so repeated calls reuse the compilation."""
+
+    def run(models, tasks, params, policy_params, policy_carry):
+        return jax.vmap(lambda grid, task: env.rollout(
+            policy_apply, policy_params, task, params, grid, policy_carry, trace))(models, tasks)
+
+    return jax.jit(run)
 
 
 def stratified_sampler(task_set: TaskSet, n_points: int, m: int):
@@ -314,6 +322,19 @@ def from_files(raw, dyr, task_config=None, sim_config=None, **overrides) -> Stud
                             task_config=task_config and str(Path(task_config).resolve()),
                             sim_config=sim_config and str(Path(sim_config).resolve())),
                  **overrides)
+
+
+def rebuild(study: Study, **compile_changes) -> Study:
+    """`study` built again from its definition with CompileSettings fields changed, e.g.
+    precision="float64", sweeps=4 (a reference model for accuracy checks)."""
+    d = study.definition
+
+    def fields(value) -> dict:
+        return {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
+
+    return build(d.grid, name=d.name, compile=dataclasses.replace(d.compile, **compile_changes),
+                 env=fields(d.env), params=fields(d.params),
+                 tasks={k: fields(v) for k, v in d.tasks.items()})
 
 
 def build(grid: GridSource, name: str | None = None,

@@ -1,0 +1,120 @@
+"""How accurate is a study's time step? Candidate (step, sweeps) pairs against a float64,
+small-step, many-sweep reference over the study's training tasks, without control.
+
+    python -m experiments.step_accuracy --study ieee39_fidvr [--dts 0.002 0.005 0.01]
+        [--sweeps 2] [--reference-dt 0.001] [--reference-sweeps 4] [--tasks train]
+        [--episode S] [--out bench_results/step_accuracy.json]
+
+For each candidate it reports, over every task and agent step (0.1 s samples of the observed
+bus voltages, float32 time loop as in training): the 99th-percentile and largest |ΔV|
+(p.u.) against the reference, the largest |ΔV| at the recovery check (the first sample
+after clearing + recovery_time), how many recovery verdicts differ from the reference's,
+and the wall time of the warm run with its ratio to the study's own step. The step the
+study should use is the fastest candidate with p99 |ΔV| <= 1e-3 p.u. and no changed
+verdict (`ACCURACY_P99`); the command names it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from experiments.evaluate import no_control
+from experiments.studyargs import add_study_arguments, study_from_args
+from jaxgrid.study import Study, rebuild, rollout_specs
+
+ACCURACY_P99 = 1e-3  # p.u.: the largest p99 |ΔV| a study's default step may have
+
+
+def run(study: Study, dt: float, episode: float, tasks: str):
+    """(vm (n_task, n_steps, n_observed), recovered (n_task,), warm wall time s) without
+    control at step dt."""
+    env = study.env(dt=dt, episode=episode)
+    apply, params, carry = no_control(env)
+    specs = study.tasks(tasks)
+    rollout_specs(study, env, apply, params, specs, carry, trace=True)  # compile
+    start = time.perf_counter()
+    _, out = rollout_specs(study, env, apply, params, specs, carry, trace=True)
+    return out["vm"], out["recovered"], time.perf_counter() - start
+
+
+def check_index(study: Study, tasks: str, agent_dt: float, n_steps: int) -> np.ndarray:
+    """(n_task,) index of the first agent-step sample at or after the recovery check."""
+    specs = study.tasks(tasks)
+    cleared = np.array([s.fault_start + s.fault_duration for s in specs])
+    at = cleared + float(study.params.recovery_time)
+    return np.minimum(np.ceil(at / agent_dt - 1e-9).astype(int) - 1, n_steps - 1)
+
+
+def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: int,
+             tasks: str = "train", episode: float | None = None) -> dict:
+    """The report of the module docstring as a dict."""
+    episode = episode or study.config.episode
+    reference = rebuild(study, precision="float64", sweeps=reference_sweeps)
+    vm_ref, ok_ref, _ = run(reference, reference_dt, episode, tasks)
+    check = check_index(study, tasks, study.config.agent_dt, vm_ref.shape[1])
+    rows = []
+    for n_sweeps in sweeps:
+        candidate_study = rebuild(study, precision="float32", sweeps=n_sweeps)
+        for dt in dts:
+            vm, ok, wall = run(candidate_study, dt, episode, tasks)
+            error = np.abs(vm - vm_ref)
+            at_check = error[np.arange(len(check)), check]
+            rows.append({"dt_s": dt, "sweeps": n_sweeps,
+                         "p99_dv_pu": float(np.percentile(error, 99)),
+                         "max_dv_pu": float(error.max()),
+                         "max_dv_at_check_pu": float(at_check.max()),
+                         "changed_verdicts": int(np.sum(ok != ok_ref)), "wall_s": wall})
+    own = [r for r in rows if r["dt_s"] == study.config.dt
+           and r["sweeps"] == study.definition.compile.sweeps]
+    for row in rows:
+        row["time_ratio_to_study_step"] = row["wall_s"] / own[0]["wall_s"] if own else None
+    good = [r for r in rows if r["p99_dv_pu"] <= ACCURACY_P99 and r["changed_verdicts"] == 0]
+    best = min(good, key=lambda r: r["wall_s"]) if good else None
+    return {"study": study.name, "tasks": tasks, "n_tasks": len(ok_ref), "episode_s": episode,
+            "reference": {"dt_s": reference_dt, "sweeps": reference_sweeps,
+                          "precision": "float64", "recovered": int(ok_ref.sum())},
+            "study_step": {"dt_s": study.config.dt,
+                           "sweeps": study.definition.compile.sweeps},
+            "candidates": rows,
+            "recommended": best and {"dt_s": best["dt_s"], "sweeps": best["sweeps"]}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m experiments.step_accuracy",
+                                description=__doc__.split("\n")[0])
+    add_study_arguments(p, "ieee39_fidvr")
+    p.add_argument("--dts", nargs="+", type=float, default=[0.002, 0.005, 0.01],
+                   help="candidate steps, s")
+    p.add_argument("--sweeps", nargs="+", type=int, default=[2], help="candidate sweeps")
+    p.add_argument("--reference-dt", type=float, default=0.001, help="s (default 1 ms)")
+    p.add_argument("--reference-sweeps", type=int, default=4)
+    p.add_argument("--tasks", default="train", help="the study's task set")
+    p.add_argument("--episode", type=float, help="s (default: the study's)")
+    p.add_argument("--out", default="bench_results/step_accuracy.json")
+    args = p.parse_args(argv)
+    try:
+        study = study_from_args(args)
+        report = accuracy(study, args.dts, args.sweeps, args.reference_dt,
+                          args.reference_sweeps, args.tasks, args.episode)
+    except (ValueError, KeyError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    for row in report["candidates"]:
+        print(f"dt {row['dt_s'] * 1000:g} ms, {row['sweeps']} sweeps: p99 |dV| "
+              f"{row['p99_dv_pu']:.2e}, max {row['max_dv_pu']:.2e}, at the check "
+              f"{row['max_dv_at_check_pu']:.2e} p.u.; {row['changed_verdicts']} changed "
+              f"verdicts of {report['n_tasks']}; {row['wall_s']:.2f} s")
+    print(f"{report['study']}: recommended {report['recommended']} (p99 |dV| <= "
+          f"{ACCURACY_P99:g} p.u., no changed verdict)")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(report, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
