@@ -24,6 +24,7 @@ bench:  ## benchmarks; figures go to bench_results/*.json
 	$(PY) -m experiments.bench_env --out bench_results/env.json
 	$(PY) -m experiments.bench_train --out bench_results/train.json
 	$(PY) -m experiments.bench_cmld --out bench_results/cmld.json
+	$(PY) -m experiments.bench_latency --out bench_results/latency.json
 
 clean:
 	rm -rf $(VENV) results bench_results .pytest_cache

@@ -1,0 +1,98 @@
+"""Decision latency: the time a controller takes to turn one observation into one action.
+
+    python -m experiments.bench_latency [--studies ieee39_fidvr ieee300_fidvr]
+        [--batch 1024] [--calls 200] [--out bench_results/latency.json]
+
+For each study, the PARS policies (linear and FNN on 10 stacked observations, LSTM on one,
+widths of the training presets) with their observation normaliser, and the UVLS relays:
+the median wall time of one jitted decision for one task (batch 1, result on the host), and
+the time per decision when a batch of tasks decides at once (one vmapped call / batch). The
+paper's Table III reports 0.72 s per PARS decision and 63.31 s per MPC decision (the MPC
+baseline is not built yet). Compile time is excluded; θ is random (the cost does not depend
+on its values).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+
+from ars.pars import initial_carry, normalized_policy
+from ars.policies import Policy, PolicySpec
+from baselines.uvls import uvls_policy
+from jaxgrid.study import load_study
+
+WIDTHS = {"ieee39_fidvr": (32, 32), "ieee300_fidvr": (64, 64)}  # the training presets
+HISTORY = {"linear": 10, "fnn": 10, "lstm": 1}  # as the study trains them
+
+
+def _median_call(fn, args, calls: int) -> float:
+    jax.block_until_ready(fn(*args))  # compile
+    times = []
+    for _ in range(calls):
+        start = time.perf_counter()
+        jax.device_get(fn(*args))
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def _controllers(study, name: str):
+    """[(label, env, policy_apply, params, carry)] of the study's controllers."""
+    out = []
+    for kind, history in HISTORY.items():
+        env = study.env(history=history)
+        hidden = () if kind == "linear" else WIDTHS.get(name, (32, 32))
+        spec = PolicySpec(kind, history * env.obs_size, len(env.action_slots), hidden)
+        policy = Policy(spec)
+        theta = 0.1 * jax.random.normal(jax.random.PRNGKey(0), (policy.size,))
+        params = (theta, jnp.zeros(spec.obs_size), jnp.ones(spec.obs_size))
+        label = f"pars_{kind}" + (f"_{'x'.join(map(str, hidden))}" if hidden else "")
+        out.append((label, env, normalized_policy(policy), params, initial_carry(policy)))
+    env = study.env()
+    out.append(("uvls", env, *uvls_policy(env)))
+    return out
+
+
+def bench_study(name: str, batch: int, calls: int) -> dict:
+    study = load_study(name)
+    rows = []
+    for label, env, apply, params, carry in _controllers(study, name):
+        obs = jnp.ones(env.config.history * env.obs_size)
+        one = jax.jit(apply)
+        many = jax.jit(jax.vmap(apply, in_axes=(None, 0, 0)))
+        carries = jax.tree.map(lambda a: jnp.broadcast_to(a, (batch,) + jnp.shape(a)), carry)
+        single = _median_call(one, (params, obs, carry), calls)
+        batched = _median_call(many, (params, jnp.tile(obs, (batch, 1)), carries),
+                               max(10, calls // 10))
+        row = {"controller": label, "obs_size": int(obs.shape[0]),
+               "one_task_ms": round(1e3 * single, 4),
+               "per_decision_in_batch_us": round(1e6 * batched / batch, 3)}
+        print(name, row, flush=True)
+        rows.append(row)
+    return {"study": name, "batch": batch, "controllers": rows}
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--studies", nargs="*", default=["ieee39_fidvr", "ieee300_fidvr"],
+                        help="built-in study names or study files")
+    parser.add_argument("--batch", type=int, default=1024)
+    parser.add_argument("--calls", type=int, default=200)
+    parser.add_argument("--out", default="bench_results/latency.json")
+    args = parser.parse_args(argv)
+    report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
+              "backend": jax.default_backend(), "paper_s": {"pars": 0.72, "mpc": 63.31},
+              "studies": [bench_study(s, args.batch, args.calls) for s in args.studies]}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(report, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
