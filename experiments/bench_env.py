@@ -16,12 +16,10 @@ os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
                            + " --xla_force_host_platform_device_count=2").strip()
 
 import argparse  # noqa: E402
-import json  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import jax  # noqa: E402
 
-from experiments.bench_sim import sharded_timings  # noqa: E402
+from experiments.bench_sim import sharded_timings, write_report  # noqa: E402
 from experiments.evaluate import no_control  # noqa: E402
 from jaxgrid.study import load_study  # noqa: E402
 
@@ -58,12 +56,8 @@ def main(argv=None) -> None:
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--out", default="bench_results/env.json")
     args = parser.parse_args(argv)
-    report = {"jax": jax.__version__, "backend": jax.default_backend(),
-              "cases": [bench_case(c, args.batch_sizes, args.devices, args.repeats)
-                        for c in args.studies]}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(report, indent=2))
-    print(f"wrote {args.out}")
+    write_report(args.out, cases=[bench_case(c, args.batch_sizes, args.devices, args.repeats)
+                                  for c in args.studies])
 
 
 if __name__ == "__main__":

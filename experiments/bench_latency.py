@@ -14,11 +14,8 @@ on its values).
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import statistics
 import time
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -26,6 +23,7 @@ import jax.numpy as jnp
 from ars.pars import initial_carry, normalized_policy
 from ars.policies import Policy, PolicySpec
 from baselines.uvls import uvls_policy
+from experiments.bench_sim import write_report
 from jaxgrid.study import load_study
 
 WIDTHS = {"ieee39_fidvr": (32, 32), "ieee300_fidvr": (64, 64)}  # the training presets
@@ -86,12 +84,8 @@ def main(argv=None) -> None:
     parser.add_argument("--calls", type=int, default=200)
     parser.add_argument("--out", default="bench_results/latency.json")
     args = parser.parse_args(argv)
-    report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
-              "backend": jax.default_backend(), "paper_s": {"pars": 0.72, "mpc": 63.31},
-              "studies": [bench_study(s, args.batch, args.calls) for s in args.studies]}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(report, indent=2))
-    print(f"wrote {args.out}")
+    write_report(args.out, paper_s={"pars": 0.72, "mpc": 63.31},
+                 studies=[bench_study(s, args.batch, args.calls) for s in args.studies])
 
 
 if __name__ == "__main__":

@@ -65,6 +65,16 @@ CASES = {  # name: (raw, dyr, models dropped for both simulators)
 }
 
 
+def write_report(path: str, **fields) -> None:
+    """Write the benchmark JSON: machine, JAX version, backend and device count, then
+    `fields`; say where it went."""
+    report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
+              "backend": jax.default_backend(), "devices": len(jax.devices()), **fields}
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(json.dumps(report, indent=2))
+    print(f"wrote {path}")
+
+
 def _timed(fn):
     start = time.perf_counter()
     out = jax.block_until_ready(fn())
@@ -164,14 +174,9 @@ def main(argv=None) -> None:
     parser.add_argument("--no-andes", action="store_true", help="skip the ANDES comparison")
     parser.add_argument("--out", default="bench_results/sim.json")
     args = parser.parse_args(argv)
-    report = {"machine": platform.processor() or platform.machine(),
-              "jax": jax.__version__, "backend": jax.default_backend(),
-              "devices": len(jax.devices()), "t_end_s": T_END, "sample_every_s": SAMPLE,
-              "cases": [bench_case(c, args.batch_sizes, args.devices, args.repeats,
-                                   not args.no_andes) for c in args.cases]}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(report, indent=2))
-    print(f"wrote {args.out}")
+    write_report(args.out, t_end_s=T_END, sample_every_s=SAMPLE,
+                 cases=[bench_case(c, args.batch_sizes, args.devices, args.repeats,
+                                   not args.no_andes) for c in args.cases])
 
 
 if __name__ == "__main__":

@@ -19,10 +19,7 @@ os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
                            + " --xla_force_host_platform_device_count=2").strip()
 
 import argparse  # noqa: E402
-import json  # noqa: E402
-import platform  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
@@ -30,7 +27,7 @@ from jax.sharding import Mesh  # noqa: E402
 
 from ars.pars import ParsConfig, init_state  # noqa: E402
 from experiments import train, train_39bus, train_300bus  # noqa: E402
-from experiments.bench_sim import _timed  # noqa: E402
+from experiments.bench_sim import _timed, write_report  # noqa: E402
 from experiments.train import build  # noqa: E402
 from jaxgrid.study import load_study  # noqa: E402
 
@@ -87,13 +84,8 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     if max(args.devices) > len(jax.devices()):
         parser.error(f"--devices {max(args.devices)}: only {len(jax.devices())} available")
-    report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
-              "backend": jax.default_backend(), "devices": len(jax.devices()),
-              "episode_s": EPISODE,
-              "cases": [bench_case(c, args.devices, args.repeats) for c in args.studies]}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(report, indent=2))
-    print(f"wrote {args.out}")
+    write_report(args.out, episode_s=EPISODE,
+                 cases=[bench_case(c, args.devices, args.repeats) for c in args.studies])
 
 
 if __name__ == "__main__":
