@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 
+from jaxgrid import cases
 from jaxgrid.study import Study, builtin, from_files, load_study
 
 
@@ -40,5 +41,8 @@ def study_from_args(args: argparse.Namespace, fallback: str | None = None) -> St
     if name is None:
         raise ValueError("no study: give --study NAME|FILE or --raw ... --dyr ...")
     if args.load_levels:
+        if name not in cases.names():
+            raise ValueError(f"--load-levels sets the operating points of a built-in study; "
+                             f"{name!r} is not one (a study file lists its RAW files)")
         return builtin(name, args.load_levels)
     return load_study(name)

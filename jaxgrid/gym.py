@@ -87,6 +87,7 @@ class LoadSheddingGymEnv(gymnasium.Env):
                            (_spec(t, k) for k, t in enumerate(tasks)))
         if not self.tasks:
             raise ValueError("tasks = []: give at least one TaskSpec, FaultEvent or None")
+        self._template = self.study.point(0)  # host arrays: bus numbering for make_task
         self._grids = [jax.device_put(self.study.point(k)) for k in range(self.study.n_points)]
         for spec in self.tasks:
             self._point(spec.operating_point)
@@ -134,7 +135,7 @@ class LoadSheddingGymEnv(gymnasium.Env):
             fault, point = spec.event(), spec.operating_point
         self._grid = self._grids[point]
         with jax.enable_x64(self._x64):
-            obs, self._state = self._reset_fn(make_task(self.study.point(0), fault),
+            obs, self._state = self._reset_fn(make_task(self._template, fault),
                                               self.params, self._grid)
         return np.asarray(obs, np.float32), {"task": fault, "point": point, "time": 0.0}
 
