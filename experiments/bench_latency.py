@@ -1,15 +1,17 @@
 """Decision latency: the time a controller takes to turn one observation into one action.
 
     python -m experiments.bench_latency [--studies ieee39_fidvr ieee300_fidvr]
-        [--batch 1024] [--calls 200] [--out bench_results/latency.json]
+        [--batch 1024] [--calls 200] [--mpc "horizon=1,iterations=10"] [--mpc-batch 32]
+        [--out bench_results/latency.json]
 
 For each study, the PARS policies (linear and FNN on 10 stacked observations, LSTM on one,
-widths of the training presets) with their observation normaliser, and the UVLS relays:
-the median wall time of one jitted decision for one task (batch 1, result on the host), and
-the time per decision when a batch of tasks decides at once (one vmapped call / batch). The
-paper's Table III reports 0.72 s per PARS decision and 63.31 s per MPC decision (the MPC
-baseline is not built yet). Compile time is excluded; θ is random (the cost does not depend
-on its values).
+widths of the training presets) with their observation normaliser, the UVLS relays and the
+MPC (`baselines.mpc`, options --mpc): the median wall time of one jitted decision for one
+task (batch 1, result on the host), and the time per decision when a batch of tasks decides
+at once (one vmapped call / batch; --mpc-batch for the MPC). The MPC decides from the state
+0.3 s after the start of the study's first test fault, the policies from a constant
+observation. The paper's Table III reports 0.72 s per PARS decision and 63.31 s per MPC
+decision. Compile time is excluded; θ is random (the cost does not depend on its values).
 """
 from __future__ import annotations
 
@@ -22,8 +24,10 @@ import jax.numpy as jnp
 
 from ars.pars import initial_carry, normalized_policy
 from ars.policies import Policy, PolicySpec
+from baselines.mpc import mpc_controller, parse_options
 from baselines.uvls import uvls_policy
 from experiments.bench_sim import write_report
+from jaxgrid.env import PlanInputs
 from jaxgrid.study import load_study
 
 WIDTHS = {"ieee39_fidvr": (32, 32), "ieee300_fidvr": (64, 64)}  # the training presets
@@ -57,7 +61,36 @@ def _controllers(study, name: str):
     return out
 
 
-def bench_study(name: str, batch: int, calls: int) -> dict:
+def mpc_row(study, options: str, batch: int, calls: int) -> dict:
+    """The MPC's latency row: one decision (`baselines.mpc.decide`) from a faulted state."""
+    env = study.env()
+    planner, mpc, zeros = mpc_controller(env, parse_options(options))
+    spec = study.tasks("test")[0]
+    grid = jax.tree.map(jnp.asarray, study.point(spec.operating_point))
+    task = jax.tree.map(lambda a: a[0], study.batch([spec]).task)
+    steps = int(round((spec.fault_start + 0.3) / env.config.agent_dt))
+    zero = jnp.zeros(len(env.action_slots), grid.load_p0.dtype)
+
+    def state_after(task):
+        _, state = env.reset(None, task, study.params, grid)
+        return jax.lax.fori_loop(0, steps, lambda _, s: env.step(s, zero, study.params,
+                                                                 grid)[1], state)
+
+    state = jax.jit(state_after)(task)
+    inputs = PlanInputs(state, grid, study.params, jnp.zeros((), jnp.int32))
+    one = jax.jit(lambda plan, inputs: planner.plan(plan, inputs, mpc))
+    many = jax.jit(jax.vmap(lambda plan, inputs: planner.plan(plan, inputs, mpc),
+                            in_axes=(0, PlanInputs(0, None, None, None))))
+    states = jax.tree.map(lambda a: jnp.broadcast_to(a, (batch,) + a.shape), state)
+    single = _median_call(one, (jnp.asarray(zeros), inputs), max(3, calls // 20))
+    batched = _median_call(many, (jnp.tile(zeros, (batch, 1, 1)),
+                                  PlanInputs(states, grid, study.params, inputs.step)), 3)
+    return {"controller": f"mpc({options or 'defaults'})", "batch": batch,
+            "one_task_ms": round(1e3 * single, 2),
+            "per_decision_in_batch_us": round(1e6 * batched / batch, 1)}
+
+
+def bench_study(name: str, batch: int, calls: int, mpc: str, mpc_batch: int) -> dict:
     study = load_study(name)
     rows = []
     for label, env, apply, params, carry in _controllers(study, name):
@@ -73,6 +106,9 @@ def bench_study(name: str, batch: int, calls: int) -> dict:
                "per_decision_in_batch_us": round(1e6 * batched / batch, 3)}
         print(name, row, flush=True)
         rows.append(row)
+    row = mpc_row(study, mpc, mpc_batch, calls)
+    print(name, row, flush=True)
+    rows.append(row)
     return {"study": name, "batch": batch, "controllers": rows}
 
 
@@ -82,10 +118,13 @@ def main(argv=None) -> None:
                         help="built-in study names or study files")
     parser.add_argument("--batch", type=int, default=1024)
     parser.add_argument("--calls", type=int, default=200)
+    parser.add_argument("--mpc", default="", help="MPC options (baselines.mpc), e.g. horizon=1")
+    parser.add_argument("--mpc-batch", type=int, default=32)
     parser.add_argument("--out", default="bench_results/latency.json")
     args = parser.parse_args(argv)
     write_report(args.out, paper_s={"pars": 0.72, "mpc": 63.31},
-                 studies=[bench_study(s, args.batch, args.calls) for s in args.studies])
+                 studies=[bench_study(s, args.batch, args.calls, args.mpc, args.mpc_batch)
+                          for s in args.studies])
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Evaluate a load-shedding controller on a study's task set, at every operating point.
 
-    python -m experiments.evaluate --study ieee39_fidvr|FILE.toml --controller none|uvls|policy:PATH \
+    python -m experiments.evaluate --study ieee39_fidvr|FILE.toml --controller none|uvls|mpc|policy:PATH \
         --tasks train|test|NAME|FILE.json --out results.json [--plot DIR]
     python -m experiments.evaluate --raw R1 R2 --dyr D --task-config J ... (a study from files)
 
@@ -56,13 +56,17 @@ def check_layout(control: str, info: dict, study: Study, env: LoadSheddingEnv) -
 
 
 def controller(spec: str, env: LoadSheddingEnv, saved=None):
-    """(policy_apply, params, carry) for "none", "uvls" or "policy:PATH" (`saved`: that
-    policy as `saved_policy` returns it, read from PATH if not given)."""
+    """(policy_apply, params, carry) for "none", "uvls", "mpc[:name=value,...]" (options of
+    `baselines.mpc.MpcOptions`) or "policy:PATH" (`saved`: that policy as `saved_policy`
+    returns it, read from PATH if not given)."""
     if spec == "none":
         return no_control(env)
     if spec == "uvls":
         from baselines.uvls import uvls_policy
         return uvls_policy(env)
+    if spec == "mpc" or spec.startswith("mpc:"):
+        from baselines.mpc import mpc_controller, parse_options
+        return mpc_controller(env, parse_options(spec.removeprefix("mpc").removeprefix(":")))
     if spec.startswith("policy:"):
         from ars.pars import initial_carry, normalized_policy
         policy, params, _ = saved or saved_policy(spec)
@@ -70,7 +74,7 @@ def controller(spec: str, env: LoadSheddingEnv, saved=None):
             raise ValueError(f"{spec}: the policy observes {policy.spec.obs_size} values, this "
                              f"environment gives {env.config.history * env.obs_size}")
         return normalized_policy(policy), params, initial_carry(policy)
-    raise ValueError(f"--controller {spec!r}: allowed none, uvls or policy:PATH")
+    raise ValueError(f"--controller {spec!r}: allowed none, uvls, mpc[:OPTIONS] or policy:PATH")
 
 
 def task_specs(study: Study, tasks: str):
@@ -152,7 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m experiments.evaluate",
                                 description=__doc__.split("\n")[0])
     add_study_arguments(p, "ieee39_fidvr")
-    p.add_argument("--controller", default="none", help="none | uvls | policy:PATH")
+    p.add_argument("--controller", default="none",
+                   help="none | uvls | mpc[:horizon=1,every=1,iterations=10,...] | policy:PATH")
     p.add_argument("--tasks", default="test", help="task set name, or a PNNL task JSON")
     p.add_argument("--out", default="results/evaluate.json")
     p.add_argument("--plot", help="folder for figures of the lowest-reward tasks")

@@ -24,6 +24,7 @@ constant of the compiled step: one compilation serves every operating point of a
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import jax
@@ -34,7 +35,7 @@ from flax import struct
 from jaxgrid import network
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
-from jaxgrid.simulate import Bounds, Health, Task, advance, healthy, observe, shed
+from jaxgrid.simulate import Bounds, Health, Task, advance, clip_closed, healthy, observe, shed
 
 
 @struct.dataclass
@@ -136,6 +137,31 @@ class EnvState:
     done: jnp.ndarray
 
 
+@struct.dataclass
+class PlanInputs:
+    """What `episode` gives a `Planner` besides the observation.
+
+    Attributes:
+      state: the episode's state before the action.  grid: the operating point's model.
+      params: the reward values.  step: () int32 agent step index; it comes from the
+        episode's scan, so it is not batched when episodes are vmapped (a `lax.cond` on it
+        stays a branch).
+    """
+
+    state: EnvState
+    grid: GridModel
+    params: EnvParams
+    step: jnp.ndarray
+
+
+class Planner:
+    """A controller that plans on the model (MPC): `episode` calls it as
+    planner(policy_params, obs, carry, inputs: PlanInputs) -> (action, carry)."""
+
+    def __call__(self, policy_params, obs, carry, inputs: PlanInputs):
+        raise NotImplementedError
+
+
 # --------------------------------------------------------------------------- #
 # Reward terms (each checked by hand in tests/test_env.py)
 # --------------------------------------------------------------------------- #
@@ -199,6 +225,12 @@ class LoadSheddingEnv:
         low = vm < float(params.recovery_level)
         return tuple(int(b) for b, is_low in zip(self.config.observed_buses, low) if is_low)
 
+    def with_config(self, **changes) -> LoadSheddingEnv:
+        """The same environment with `EnvConfig` fields changed (e.g. dt, episode), checked."""
+        env = copy.copy(self)
+        env.config = dataclasses.replace(self.config, **changes)
+        return env
+
     @property
     def obs_size(self) -> int:
         """Length of one observation (before stacking)."""
@@ -232,7 +264,7 @@ class LoadSheddingEnv:
         cfg, task = self.config, state.task
         real = jnp.real(grid.network.z_ss).dtype
         t = state.step.astype(real) * cfg.agent_dt
-        request = -jnp.clip(action, params.action_low, params.action_high)  # >= 0
+        request = -clip_closed(action, params.action_low, params.action_high)  # >= 0
         left = state.grid.load_left[self.action_slots]
         amount = jnp.minimum(request, left)
         x = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
@@ -244,17 +276,17 @@ class LoadSheddingEnv:
         after = t_next - task.fault_end
         failed = recovery_failed(vm, state.recovery_check, after, params) | health.diverged
         shed_pu = shed_power(amount, grid.load_p0[self.action_slots])
-        reward = (params.c_voltage * envelope_deviation(vm, after) - params.c_shed * shed_pu
+        shaped = (params.c_voltage * envelope_deviation(vm, after) - params.c_shed * shed_pu
                   - params.c_invalid * invalid_requests(request, left)
                   - params.c_prefault * prefault_requests(request, t, task.fault_start))
-        reward = jnp.where(failed, -params.unstable_penalty, reward)
+        reward = jnp.where(failed, -params.unstable_penalty, shaped)
         truncated = state.step + 1 >= cfg.n_steps
         done = failed | truncated
         history = jnp.concatenate([state.history[1:], obs[None]])
         new = EnvState(grid=x, health=health, task=task, step=state.step + 1,
                        history=history, recovery_check=state.recovery_check, done=done)
         info = {"terminated": failed, "truncated": truncated & ~failed,
-                "shed_pu": shed_pu,
+                "shed_pu": shed_pu, "shaped_reward": shaped,
                 "diverged": health.diverged}
         return history.reshape(-1), new, reward, done, info
 
@@ -263,8 +295,9 @@ class LoadSheddingEnv:
         """One whole episode in `lax.scan` (un-batched; `rollout` vmaps it over tasks).
 
         policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
-        initial policy state (None for feed-forward policies). After `done` the reward
-        stops and the policy state is held. Returns {"reward", "shed_pu", "recovered",
+        initial policy state (None for feed-forward policies). A `Planner` (e.g. the MPC)
+        is called with a fourth argument, `PlanInputs`. After `done` the reward stops and
+        the policy state is held. Returns {"reward", "shed_pu", "recovered",
         "steps" (agent steps taken), "diverged", "policy_carry" (final)}; with `trace`
         (static) also per agent step "vm" (n_steps, n_observed) p.u. and "shed_step_pu"
         (n_steps,), frozen after the episode ends.
@@ -272,10 +305,12 @@ class LoadSheddingEnv:
         n_observed = len(self.observed)
         obs, state = self.reset(None, task, params, grid)
 
-        def step(carry, _):
+        def step(carry, k):
             obs, state, policy_state, total, shed, failed = carry
             live = ~state.done
-            action, new_policy_state = policy_apply(policy_params, obs, policy_state)
+            inputs = (PlanInputs(state, grid, params, k),) if isinstance(policy_apply,
+                                                                        Planner) else ()
+            action, new_policy_state = policy_apply(policy_params, obs, policy_state, *inputs)
             policy_state = jax.tree.map(lambda a, b: jnp.where(live, a, b), new_policy_state,
                                         policy_state)
             obs, new, reward, _, info = self.step(state, action, params, grid)
@@ -289,7 +324,7 @@ class LoadSheddingEnv:
         zero = jnp.zeros((), obs.dtype)
         init = (obs, state, policy_carry, zero, zero, jnp.zeros((), bool))
         (_, state, carry, total, shed, failed), per_step = jax.lax.scan(
-            step, init, None, length=self.config.n_steps)
+            step, init, jnp.arange(self.config.n_steps))
         out = {"reward": total, "shed_pu": shed, "recovered": ~failed, "steps": state.step,
                "diverged": state.health.diverged, "policy_carry": carry}
         if trace:

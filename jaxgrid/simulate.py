@@ -147,13 +147,19 @@ def _is_on(t, start, dt):
     return (t >= start - 0.5 * dt).astype(t.dtype)
 
 
+def clip_closed(x, low, high):
+    """jnp.clip(x, low, high) whose gradient is 1 on the closed range [low, high] (jnp.clip's
+    is ½ or 0 at a bound, which hides the gradient of shedding from "no shedding")."""
+    return jnp.where((x >= low) & (x <= high), x, jnp.clip(x, low, high))
+
+
 def shed(load_left, slot, fraction):
     """Connected fractions (n_load,) after shedding `fraction` (k,) at load slots `slot` (k,).
 
     Clipped to [0, 1] per slot (spec acmtblu1 §9): a request beyond what remains sheds
     what remains.
     """
-    return jnp.clip(load_left - jnp.zeros_like(load_left).at[slot].add(fraction), 0.0, 1.0)
+    return clip_closed(load_left - jnp.zeros_like(load_left).at[slot].add(fraction), 0.0, 1.0)
 
 
 def scheduled_shedding(task: Task, x: GridState, t, dt) -> GridState:

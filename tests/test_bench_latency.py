@@ -7,9 +7,12 @@ from experiments.bench_latency import main
 
 def test_every_controller_is_timed_on_its_own_observation(tmp_path):
     out = tmp_path / "latency.json"
-    main(["--studies", "ieee39_fidvr", "--batch", "4", "--calls", "3", "--out", str(out)])
+    main(["--studies", "ieee39_fidvr", "--batch", "4", "--calls", "3", "--out", str(out),
+          "--mpc", "horizon=0.2,iterations=2", "--mpc-batch", "2"])
     (study,) = json.loads(out.read_text())["studies"]
     rows = {r["controller"]: r for r in study["controllers"]}
+    mpc = rows.pop("mpc(horizon=0.2,iterations=2)")
+    assert mpc["batch"] == 2 and mpc["one_task_ms"] > 0 and mpc["per_decision_in_batch_us"] > 0
     assert set(rows) == {"pars_linear", "pars_fnn_32x32", "pars_lstm_32x32", "uvls"}
     # 8 observed voltages + 3 load fractions, 10 stacked for linear / FNN, 1 for LSTM / UVLS
     assert [rows[k]["obs_size"] for k in sorted(rows)] == [110, 110, 11, 11]

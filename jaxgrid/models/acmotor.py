@@ -28,15 +28,24 @@ Other choices: timers fire at ≥ T − 0.01·dt, not § 6.7's T − 1e-9 s, whi
 round-off of the summed steps defeats (`base.timer_fires`); CompPF = 0 is rejected (a power factor is needed); Vx is floored at
 `VX_FLOOR` p.u. so a running motor's current stays bounded; the current is computed as
 an equivalent admittance conj(S)/|V|², which is exact and safe at V → 0.
+
+Gradient surrogate (for model-predictive control, `baselines.mpc`): the stall, the stall
+jump at Vx and the restart are switches with zero gradient. Parameters
+`stall_surrogate_v` (p.u.) and `stall_surrogate_t` (s), 0 in a compiled model, give them
+the gradient of a sigmoid of that width in the voltage margin and the timer margin
+(`base.surrogate_gradient`); the simulated values stay bitwise those of the exact model.
+UV trips, contactors and thermal tripping keep their exact (zero) gradient.
 """
 from __future__ import annotations
 
 import dataclasses
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.models.base import Array, Con, LoadModel, LoadSite, Params, States, timer_fires
+from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, Params, States,
+                                 surrogate_gradient, timer_fires)
 
 VX_FLOOR = 0.3  # p.u.: lowest stall-jump voltage (spec §7 guard)
 VX_SCAN_FROM = 0.4  # p.u.: where the Vx search starts (spec §4)
@@ -173,6 +182,7 @@ class Acmtblu1(LoadModel):
         p.update(complf=lf, vstall_adj=vstall, vbrk_adj=vbrk, gs=gs, bs=bs, sm=sm,
                  omega0=np.full_like(v0, 2 * np.pi * site.f_nom),
                  restall=np.full_like(v0, float(options.restall_b)),
+                 stall_surrogate_v=np.zeros_like(v0), stall_surrogate_t=np.zeros_like(v0),
                  thermal_on=((p["th1t"] > 0) & (p["th2t"] > p["th1t"])).astype(float))
         p0 = lf - _running_curve(p, v_ref, "p", 0.0 * v0)
         q0 = q_init - _running_curve(p, v_ref, "q", 0.0 * v0)
@@ -265,8 +275,15 @@ def _power(p, vmag, running, dfm, xp):
     zero = 0.0 * vmag
     p_run = (p["p0"] + _running_curve(p, vmag, "p", zero, xp)) * (1.0 + p["cmpkpf"] * dfm)
     q_run = (p["q0"] + _running_curve(p, vmag, "q", zero, xp)) * (1.0 + p["cmpkqf"] * dfm)
-    stalled = (running < 0.5) | (vmag <= p["vx"])
-    return xp.where(stalled, (p["gs"] + 1j * p["bs"]) * vmag ** 2, p_run + 1j * q_run)
+    s_run, s_stall = p_run + 1j * q_run, (p["gs"] + 1j * p["bs"]) * vmag ** 2
+    above_vx = vmag > p["vx"]
+    s = xp.where((running < 0.5) | ~above_vx, s_stall, s_run)
+    if xp is np:
+        return s
+    # gradient only (module docstring): through the run flag and the jump at Vx
+    share = (above_vx * (running - jax.lax.stop_gradient(running))
+             + running * surrogate_gradient(vmag - p["vx"], p["stall_surrogate_v"]))
+    return s + share * (s_run - s_stall)
 
 
 def _heat(p, vmag, running, dfm, xp=jnp):
@@ -282,19 +299,31 @@ def _lag_step(x, u, t, dt: float):
 
 def _stall_and_restart(p, z, vmag, dt: float):
     """Run flags and timers after a step (spec §6.2-6.3)."""
+    width_v, width_t = p["stall_surrogate_v"], p["stall_surrogate_t"]
+    low_v = surrogate_gradient(p["vstall_adj"] - vmag, width_v)  # gradient of "V < Vstall'"
     low = vmag < p["vstall_adj"]
-    ts_a = jnp.where((z["run_a"] > 0) & low, z["ts_a"] + dt, 0.0)
-    stall_a = (z["run_a"] > 0) & timer_fires(ts_a, p["tstall"], dt)
-    ts_b = jnp.where((z["run_b"] > 0) & low, z["ts_b"] + dt, 0.0)
-    stall_b = jnp.where(p["restall"] > 0, (z["run_b"] > 0) & timer_fires(ts_b, p["tstall"], dt),
+    ts = {}
+    for part in "ab":
+        running = z[f"run_{part}"] > 0
+        ts[part] = (jnp.where(running & low, z[f"ts_{part}"] + dt, 0.0)
+                    + running * low_v * (z[f"ts_{part}"] + dt))
+    stall_a = (z["run_a"] > 0) & timer_fires(ts["a"], p["tstall"], dt)
+    stall_b = jnp.where(p["restall"] > 0, (z["run_b"] > 0) & timer_fires(ts["b"], p["tstall"], dt),
                         stall_a & (z["run_b"] > 0))
-    run_a = jnp.where(stall_a, 0.0, z["run_a"])
-    run_b = jnp.where(stall_b, 0.0, z["run_b"])
-    ts_a, ts_b = jnp.where(stall_a, 0.0, ts_a), jnp.where(stall_b, 0.0, ts_b)
-    may_restart = (p["frst"] > 0) & (run_b < 0.5) & (vmag > p["vrst"])
-    tr_b = jnp.where(may_restart, z["tr_b"] + dt, 0.0)
+    late_a = surrogate_gradient(ts["a"] - p["tstall"], width_t)
+    late_b = jnp.where(p["restall"] > 0, surrogate_gradient(ts["b"] - p["tstall"], width_t),
+                       late_a)
+    run_a = jnp.where(stall_a, 0.0, z["run_a"]) - late_a * z["run_a"]
+    run_b = jnp.where(stall_b, 0.0, z["run_b"]) - late_b * z["run_b"]
+    ts_a, ts_b = jnp.where(stall_a, 0.0, ts["a"]), jnp.where(stall_b, 0.0, ts["b"])
+    can_restart = (p["frst"] > 0) & (run_b < 0.5)
+    may_restart = can_restart & (vmag > p["vrst"])
+    tr_b = (jnp.where(may_restart, z["tr_b"] + dt, 0.0)
+            + can_restart * surrogate_gradient(vmag - p["vrst"], width_v) * (z["tr_b"] + dt))
     restart = may_restart & timer_fires(tr_b, p["trst"], dt)
-    return run_a, jnp.where(restart, 1.0, run_b), ts_a, ts_b, jnp.where(restart, 0.0, tr_b)
+    run_b = (jnp.where(restart, 1.0, run_b)
+             + may_restart * surrogate_gradient(tr_b - p["trst"], width_t) * (1.0 - run_b))
+    return run_a, run_b, ts_a, ts_b, jnp.where(restart, 0.0, tr_b)
 
 
 def _contactor(p, vc_min, vm):

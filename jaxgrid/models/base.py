@@ -13,6 +13,7 @@ import math
 from collections.abc import Sequence
 from typing import ClassVar, NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -150,6 +151,20 @@ def timer_fires(elapsed: Array, setting: Array, dt: float) -> Array:
     steps, so a float32 run fires on the same step as a float64 one.
     """
     return elapsed >= setting - TIMER_TOL_STEPS * dt
+
+
+def surrogate_gradient(margin: Array, width: Array) -> Array:
+    """Zero in value; the gradient of sigmoid(margin / width) (straight-through surrogate).
+
+    Added as `switch_value + surrogate_gradient(m, w)·(on − off)` to a hard switch that is
+    on where m > 0, it leaves the simulated trajectory bitwise unchanged and gives the switch
+    the gradient of a sigmoid transition of width `width` (units of `margin`). width <= 0:
+    no gradient (the exact model's zero). Used by the MPC's prediction model
+    (`baselines.mpc.surrogate_model`).
+    """
+    on = width > 0
+    soft = jax.nn.sigmoid(margin / jnp.where(on, width, 1.0))
+    return jnp.where(on, soft - jax.lax.stop_gradient(soft), 0.0)
 
 
 def quadratic_saturation(x: Array, a: Array, b: Array, xp=jnp) -> Array:

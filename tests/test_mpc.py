@@ -1,0 +1,114 @@
+"""The MPC baseline: its gradient against central finite differences on a smooth case, one
+decision against "no shedding", the stall surrogate leaving trajectories unchanged, and the
+option parser.
+
+The gradient check runs the built-in 39-bus study in float64 (central differences with
+h = 1e-4 then carry ~h² ≈ 1e-8 relative truncation error and ~1e-12/h round-off, so 1e-5
+relative is a safe bound); the decision runs it in float32, as the evaluation does.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from baselines.mpc import (MpcOptions, MpcParams, decide, horizon_return, mpc_controller,
+                           parse_options, surrogate_model)
+from jaxgrid.study import builtin, rebuild
+from jaxgrid.tasks import TaskSpec
+
+AGENT_STEPS_TO = 13  # decisions at t = 1.3 s: the fault (1.0 s) is on or cleared
+
+
+def state_at(study, env, spec: TaskSpec, steps: int):
+    """(env state after `steps` agent steps without shedding, grid model (jnp arrays))."""
+    grid = jax.tree.map(jnp.asarray, study.point(spec.operating_point))
+    task = jax.tree.map(lambda a: a[0], study.batch([spec]).task)
+    zero = jnp.zeros(len(env.action_slots), grid.load_p0.dtype)
+
+    def run(task):
+        _, state = env.reset(None, task, study.params, grid)
+        return jax.lax.fori_loop(0, steps, lambda _, s: env.step(s, zero, study.params,
+                                                                 grid)[1], state)
+
+    return jax.jit(run)(task), grid
+
+
+@pytest.fixture(scope="module")
+def study32():
+    return builtin("ieee39_fidvr")
+
+
+def test_gradient_matches_central_differences_without_stall():
+    with jax.enable_x64(True):
+        study = rebuild(builtin("ieee39_fidvr"), precision="float64")
+        env = study.env()
+        # a remote fault through 0.05 p.u.: no motor stalls, every switch stays put
+        spec = TaskSpec(fault_bus=29, fault_duration=0.08, fault_start=1.0, operating_point=0,
+                        fault_r=0.0, fault_x=0.05)
+        state, grid = state_at(study, env, spec, 11)
+        plan = jnp.full((5, len(env.action_slots)), 0.05)  # inside (0, 0.2): smooth there
+        value = jax.jit(lambda p: horizon_return(env, p, state, study.params, grid))
+        grad = np.asarray(jax.jit(jax.grad(lambda p: horizon_return(
+            env, p, state, study.params, grid)))(plan))
+        h = 1e-4
+        for k, j in [(0, 0), (0, 2), (2, 1), (4, 0)]:
+            e = jnp.zeros_like(plan).at[k, j].set(h)
+            central = (float(value(plan + e)) - float(value(plan - e))) / (2 * h)
+            assert grad[k, j] == pytest.approx(central, rel=1e-5, abs=1e-6), (k, j)
+        assert np.abs(grad).max() > 1.0, "the voltage benefit of shedding shows in the gradient"
+        flags = state.grid.load_flags[0]
+        assert np.all(np.asarray(flags["run_a"]) == 1.0), "precondition: no motor stalled"
+
+
+@pytest.fixture(scope="module")
+def stalled_case(study32):
+    """A bolted 0.1 s fault at bus 4 next to a motor bus: the motors stall (FIDVR)."""
+    env = study32.env()
+    spec = TaskSpec(fault_bus=4, fault_duration=0.1, fault_start=1.0, operating_point=0,
+                    fault_r=0.0, fault_x=1e-4)
+    state, grid = state_at(study32, env, spec, AGENT_STEPS_TO)
+    return env, state, grid
+
+
+def test_one_decision_beats_no_shedding(study32, stalled_case):
+    env, state, grid = stalled_case
+    options = MpcOptions()
+    planner, mpc, zeros = mpc_controller(env, options)
+    assert np.any(np.asarray(state.grid.load_flags[0]["run_a"]) == 0.0), "motors stalled"
+    surrogate = surrogate_model(grid, mpc.width, mpc.timer_width)
+    best_plan, best, no_shedding = jax.jit(lambda: decide(
+        env, options.iterations, jnp.asarray(zeros), state, study32.params, surrogate,
+        mpc))()
+    assert float(best) > float(no_shedding) + 0.05 * abs(float(no_shedding)), \
+        (float(best), float(no_shedding))
+    assert float(jnp.max(best_plan)) <= -study32.params.action_low + 1e-7
+    assert float(jnp.min(best_plan)) >= 0.0
+
+
+def test_surrogate_changes_gradients_not_trajectories(study32, stalled_case):
+    env, state, grid = stalled_case
+    plan = jnp.full((4, len(env.action_slots)), 0.1, jnp.float32)
+
+    def run(width):
+        g = surrogate_model(grid, width, width)
+        return jax.value_and_grad(lambda p: horizon_return(env, p, state, study32.params, g))(
+            plan)
+
+    (v0, g0), (v1, g1) = jax.jit(run)(0.0), jax.jit(run)(0.05)
+    assert float(v0) == float(v1), "the surrogate leaves the predicted return unchanged"
+    assert not np.array_equal(np.asarray(g0), np.asarray(g1)), "but not its gradient"
+
+
+def test_options_parse_and_name_the_bad_one(study32):
+    assert parse_options("") == MpcOptions()
+    assert parse_options("horizon=2,iterations=5,every=2") == MpcOptions(
+        horizon=2.0, iterations=5, every=2)
+    with pytest.raises(ValueError, match=r"horizon = -1.0 .*allowed \(0.0, 30.0\]"):
+        parse_options("horizon=-1")
+    with pytest.raises(ValueError, match="name=value with name one of"):
+        parse_options("depth=3")
+    with pytest.raises(ValueError, match="every = '2.5': not an int"):
+        parse_options("every=2.5")
+    assert isinstance(mpc_controller(study32.env())[1], MpcParams)
