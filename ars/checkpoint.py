@@ -24,9 +24,12 @@ def manager(directory: str | Path, every: int) -> ocp.CheckpointManager:
     return ocp.CheckpointManager(Path(directory).absolute(), options=options)
 
 
-def save(mgr: ocp.CheckpointManager, state: TrainState, meta: dict, force: bool = False) -> None:
-    """Save `state` and the JSON-able `meta` at step = state.iteration (if due or forced)."""
-    mgr.save(int(state.iteration), args=ocp.args.Composite(
+def save(mgr: ocp.CheckpointManager, state: TrainState, meta: dict, force: bool = False,
+         step: int | None = None) -> None:
+    """Save `state` (any pytree) and the JSON-able `meta` at `step` (default
+    state.iteration), if due or forced."""
+    step = int(state.iteration) if step is None else int(step)
+    mgr.save(step, args=ocp.args.Composite(
         state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta)), force=force)
     mgr.wait_until_finished()
 

@@ -393,6 +393,14 @@ def make_apply(info: PolicyInfo):
 _APPLY: dict = {}
 
 
+def cached_apply(info: PolicyInfo):
+    """`make_apply(info)`, one function per architecture, so repeated evaluations
+    (`jaxgrid.study.rollout_specs` caches by function) reuse their compilation."""
+    if info not in _APPLY:
+        _APPLY[info] = make_apply(info)
+    return _APPLY[info]
+
+
 def policy_params(state) -> dict:
     """{"actor", "obs_mean", "obs_var"} of a rejax PPO train state."""
     return {"actor": state.actor_ts.params, "obs_mean": state.obs_rms_state.mean,
@@ -401,15 +409,12 @@ def policy_params(state) -> dict:
 
 def ppo_policy(source, algo: PPO | None = None):
     """(policy_apply, params, carry) of a trained PPO: `source` a saved policy folder or a
-    rejax train state (then `algo` gives the architecture). One apply function per
-    architecture, so repeated evaluations reuse their compilation."""
+    rejax train state (then `algo` gives the architecture). Feed-forward: the carry is None."""
     if isinstance(source, (str, Path)):
         info, params, _ = load_policy(source)
     else:
         info, params = policy_info(algo), policy_params(source)
-    if info not in _APPLY:
-        _APPLY[info] = make_apply(info)
-    return _APPLY[info], params, None
+    return cached_apply(info), params, None
 
 
 def save_policy(directory: str | Path, algo: PPO, state, extra: dict) -> None:
