@@ -58,13 +58,20 @@ def save_policy(directory: str | Path, spec: PolicySpec, state: TrainState, extr
              mean=np.asarray(state.stats.mean), std=np.asarray(state.stats.std))
 
 
-def load_policy(directory: str | Path):
-    """(Policy, (θ, mean, std), info dict) from a folder written by `save_policy`."""
+def read_policy_info(directory: str | Path) -> dict:
+    """policy.json of a saved policy folder; ValueError if policy.json or policy.npz is
+    missing."""
     folder = Path(directory)
     for name in ("policy.json", "policy.npz"):
         if not (folder / name).is_file():
             raise ValueError(f"{folder}: no {name} (not a saved policy folder)")
-    info = json.loads((folder / "policy.json").read_text())
+    return json.loads((folder / "policy.json").read_text())
+
+
+def load_policy(directory: str | Path):
+    """(Policy, (θ, mean, std), info dict) from a folder written by `save_policy`."""
+    folder = Path(directory)
+    info = read_policy_info(folder)
     spec = info["spec"]
     policy = Policy(PolicySpec(**{**spec, "hidden": tuple(spec["hidden"])}))
     arrays = np.load(folder / "policy.npz")

@@ -433,11 +433,10 @@ def save_policy(directory: str | Path, algo: PPO, state, extra: dict) -> None:
 
 def load_policy(directory: str | Path):
     """(PolicyInfo, params, info dict) of a folder written by `save_policy`."""
+    from ars.checkpoint import read_policy_info
+
     folder = Path(directory)
-    for name in ("policy.json", "policy.npz"):
-        if not (folder / name).is_file():
-            raise ValueError(f"{folder}: no {name} (not a saved policy folder)")
-    meta = json.loads((folder / "policy.json").read_text())
+    meta = read_policy_info(folder)
     if meta.get("kind") != "ppo":
         raise ValueError(f"{folder}: not a PPO policy (kind {meta.get('kind')!r}); use "
                          "policy:PATH for PARS policies")

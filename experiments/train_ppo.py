@@ -233,6 +233,8 @@ def _learning_curve(log: list[dict], path: Path, study: str, n_tasks: int) -> No
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from experiments.train import save_curve
+
     steps = np.array([m["env_steps"] for m in log])
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.plot(steps, [m["reward_mean"] for m in log], "o-", ms=3,
@@ -240,14 +242,7 @@ def _learning_curve(log: list[dict], path: Path, study: str, n_tasks: int) -> No
     train = [(s, m["reward_train"]) for s, m in zip(steps, log) if m["reward_train"] is not None]
     if train:
         ax.plot(*zip(*train), alpha=0.6, label="episodes ended during collection")
-    ax.set_xlabel("environment steps")
-    ax.set_ylabel("reward per episode")
-    ax.set_title(f"PPO on {study}")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_curve(fig, ax, path, "environment steps", f"PPO on {study}")
 
 
 if __name__ == "__main__":
