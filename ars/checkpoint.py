@@ -72,6 +72,8 @@ def load_policy(directory: str | Path):
     """(Policy, (θ, mean, std), info dict) from a folder written by `save_policy`."""
     folder = Path(directory)
     info = read_policy_info(folder)
+    if info.get("kind") == "ppo":
+        raise ValueError(f"{folder}: a PPO policy (baselines.ppo): use ppo:PATH")
     spec = info["spec"]
     policy = Policy(PolicySpec(**{**spec, "hidden": tuple(spec["hidden"])}))
     arrays = np.load(folder / "policy.npz")

@@ -22,8 +22,10 @@ PPO) defaults: KL coefficient 0.2 (fixed here: RLlib adapts it towards kl_target
 after every iteration, we do not), γ = 0.99, GAE λ = 1.0, 30 epochs (num_sgd_iter), 4000
 transitions per iteration (train_batch_size: 40 envs × 100 steps, one 10 s episode each) in
 minibatches of 125 (≈ sgd_minibatch_size 128), value loss coefficient 1.0, no gradient
-clipping, tanh activations, and actions normalised (`normalize_actions`: the policy acts in
-[-1, 1], mapped linearly onto [action_low, action_high]).
+clipping, tanh activations, and actions normalised as RLlib's `normalize_actions` does (the
+policy acts in [-1, 1], mapped linearly onto [action_low, action_high]). So the untrained
+policy's mean action is the middle of the range, shedding 10 % of each action bus's load per
+step on the study's range [-0.2, 0] (PARS's policies start at no shedding).
 
 Differences from RLlib that remain (rejax's design, kept):
   - the log std of the Gaussian is one free parameter per action (RLlib: an output of the

@@ -202,3 +202,6 @@ def test_evaluate_runs_the_saved_policy_and_names_a_layout_mismatch(straight, tm
     assert evaluate.main(["--study", str(other), "--controller", f"ppo:{tmp_path}",
                           "--out", str(tmp_path / "x.json")]) == 2
     assert "not a saved policy folder" in capsys.readouterr().err
+    assert evaluate.main(["--study", str(other), "--controller", f"policy:{straight / 'policy'}",
+                          "--out", str(tmp_path / "x.json")]) == 2
+    assert "use ppo:PATH" in capsys.readouterr().err
