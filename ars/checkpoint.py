@@ -24,9 +24,12 @@ def manager(directory: str | Path, every: int) -> ocp.CheckpointManager:
     return ocp.CheckpointManager(Path(directory).absolute(), options=options)
 
 
-def save(mgr: ocp.CheckpointManager, state: TrainState, meta: dict, force: bool = False) -> None:
-    """Save `state` and the JSON-able `meta` at step = state.iteration (if due or forced)."""
-    mgr.save(int(state.iteration), args=ocp.args.Composite(
+def save(mgr: ocp.CheckpointManager, state: TrainState, meta: dict, force: bool = False,
+         step: int | None = None) -> None:
+    """Save `state` (any pytree) and the JSON-able `meta` at `step` (default
+    state.iteration), if due or forced."""
+    step = int(state.iteration) if step is None else int(step)
+    mgr.save(step, args=ocp.args.Composite(
         state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta)), force=force)
     mgr.wait_until_finished()
 
@@ -55,13 +58,22 @@ def save_policy(directory: str | Path, spec: PolicySpec, state: TrainState, extr
              mean=np.asarray(state.stats.mean), std=np.asarray(state.stats.std))
 
 
-def load_policy(directory: str | Path):
-    """(Policy, (θ, mean, std), info dict) from a folder written by `save_policy`."""
+def read_policy_info(directory: str | Path) -> dict:
+    """policy.json of a saved policy folder; ValueError if policy.json or policy.npz is
+    missing."""
     folder = Path(directory)
     for name in ("policy.json", "policy.npz"):
         if not (folder / name).is_file():
             raise ValueError(f"{folder}: no {name} (not a saved policy folder)")
-    info = json.loads((folder / "policy.json").read_text())
+    return json.loads((folder / "policy.json").read_text())
+
+
+def load_policy(directory: str | Path):
+    """(Policy, (θ, mean, std), info dict) from a folder written by `save_policy`."""
+    folder = Path(directory)
+    info = read_policy_info(folder)
+    if info.get("kind") == "ppo":
+        raise ValueError(f"{folder}: a PPO policy (baselines.ppo): use ppo:PATH")
     spec = info["spec"]
     policy = Policy(PolicySpec(**{**spec, "hidden": tuple(spec["hidden"])}))
     arrays = np.load(folder / "policy.npz")

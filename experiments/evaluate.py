@@ -1,6 +1,6 @@
 """Evaluate a load-shedding controller on a study's task set, at every operating point.
 
-    python -m experiments.evaluate --study ieee39_fidvr|FILE.toml --controller none|uvls|mpc|policy:PATH \
+    python -m experiments.evaluate --study ieee39_fidvr|FILE.toml --controller none|uvls|mpc|policy:PATH|ppo:PATH \
         --tasks train|test|NAME|FILE.json --out results.json [--plot DIR]
     python -m experiments.evaluate --raw R1 R2 --dyr D --task-config J ... (a study from files)
 
@@ -11,7 +11,8 @@ with the study's operating points, make the set. Writes {"study", "controller", 
 "mean_reward", "total_shed_mw"}} and the resolved study beside it (OUT.study.toml). With
 --plot, draws for the lowest-reward tasks (--plot-count) the observed bus voltages against
 the recovery envelope and the total load shed against time. All operating points run in one
-compiled, vmapped call. A saved policy must observe and act on the study's buses.
+compiled, vmapped call. A saved policy (PARS: policy:PATH, PPO: ppo:PATH, a folder written by
+`experiments.train` or `experiments.train_ppo`) must observe and act on the study's buses.
 """
 from __future__ import annotations
 
@@ -37,7 +38,11 @@ def no_control(env: LoadSheddingEnv):
 
 
 def saved_policy(control: str):
-    """(Policy, (θ, mean, std), info) of a "policy:PATH" controller, read once; else None."""
+    """(Policy, (θ, mean, std), info) of a "policy:PATH" controller, (PolicyInfo, params,
+    info) of a "ppo:PATH" one, read once; else None."""
+    if control.startswith("ppo:"):
+        from baselines.ppo import load_policy as load_ppo
+        return load_ppo(control.removeprefix("ppo:"))
     if not control.startswith("policy:"):
         return None
     from ars.checkpoint import load_policy
@@ -57,8 +62,8 @@ def check_layout(control: str, info: dict, study: Study, env: LoadSheddingEnv) -
 
 def controller(spec: str, env: LoadSheddingEnv, saved=None):
     """(policy_apply, params, carry) for "none", "uvls", "mpc[:name=value,...]" (options of
-    `baselines.mpc.MpcOptions`) or "policy:PATH" (`saved`: that policy as `saved_policy`
-    returns it, read from PATH if not given)."""
+    `baselines.mpc.MpcOptions`), "policy:PATH" or "ppo:PATH" (`saved`: that policy as
+    `saved_policy` returns it, read from PATH if not given)."""
     if spec == "none":
         return no_control(env)
     if spec == "uvls":
@@ -74,7 +79,15 @@ def controller(spec: str, env: LoadSheddingEnv, saved=None):
             raise ValueError(f"{spec}: the policy observes {policy.spec.obs_size} values, this "
                              f"environment gives {env.config.history * env.obs_size}")
         return normalized_policy(policy), params, initial_carry(policy)
-    raise ValueError(f"--controller {spec!r}: allowed none, uvls, mpc[:OPTIONS] or policy:PATH")
+    if spec.startswith("ppo:"):
+        from baselines.ppo import cached_apply
+        info, params, _ = saved or saved_policy(spec)
+        if info.obs_size != env.config.history * env.obs_size:
+            raise ValueError(f"{spec}: the policy observes {info.obs_size} values, this "
+                             f"environment gives {env.config.history * env.obs_size}")
+        return cached_apply(info), params, None
+    raise ValueError(f"--controller {spec!r}: allowed none, uvls, mpc[:OPTIONS], policy:PATH "
+                     "or ppo:PATH")
 
 
 def task_specs(study: Study, tasks: str):
@@ -157,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
                                 description=__doc__.split("\n")[0])
     add_study_arguments(p, "ieee39_fidvr")
     p.add_argument("--controller", default="none",
-                   help="none | uvls | mpc[:horizon=1,every=1,iterations=10,...] | policy:PATH")
+                   help="none | uvls | mpc[:horizon=1,every=2,...] | policy:PATH (PARS) | "
+                        "ppo:PATH (PPO)")
     p.add_argument("--tasks", default="test", help="task set name, or a PNNL task JSON")
     p.add_argument("--out", default="results/evaluate.json")
     p.add_argument("--plot", help="folder for figures of the lowest-reward tasks")

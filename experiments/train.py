@@ -222,9 +222,16 @@ def _learning_curve(log: list[dict], path: Path, study: str) -> None:
     if len(log) > window:
         smooth = np.convolve([m["reward_mean"] for m in log], np.ones(window) / window, "valid")
         ax.plot(it[window - 1:], smooth, "k", lw=1.5, label=f"mean, {window}-iteration average")
-    ax.set_xlabel("iteration")
+    save_curve(fig, ax, path, "iteration", f"PARS on {study}")
+
+
+def save_curve(fig, ax, path: Path, xlabel: str, title: str) -> None:
+    """Label, title, legend and grid a learning curve (reward per episode) and save it."""
+    import matplotlib.pyplot as plt
+
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("reward per episode")
-    ax.set_title(f"PARS on {study}")
+    ax.set_title(title)
     ax.legend()
     ax.grid(alpha=0.3)
     fig.tight_layout()
