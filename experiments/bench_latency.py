@@ -69,14 +69,7 @@ def mpc_row(study, options: str, batch: int, calls: int) -> dict:
     grid = jax.tree.map(jnp.asarray, study.point(spec.operating_point))
     task = jax.tree.map(lambda a: a[0], study.batch([spec]).task)
     steps = int(round((spec.fault_start + 0.3) / env.config.agent_dt))
-    zero = jnp.zeros(len(env.action_slots), grid.load_p0.dtype)
-
-    def state_after(task):
-        _, state = env.reset(None, task, study.params, grid)
-        return jax.lax.fori_loop(0, steps, lambda _, s: env.step(s, zero, study.params,
-                                                                 grid)[1], state)
-
-    state = jax.jit(state_after)(task)
+    state = jax.jit(lambda t: env.state_after(t, study.params, grid, steps))(task)
     inputs = PlanInputs(state, grid, study.params, jnp.zeros((), jnp.int32))
     one = jax.jit(lambda plan, inputs: planner.plan(plan, inputs, mpc))
     many = jax.jit(jax.vmap(lambda plan, inputs: planner.plan(plan, inputs, mpc),

@@ -290,6 +290,13 @@ class LoadSheddingEnv:
                 "diverged": health.diverged}
         return history.reshape(-1), new, reward, done, info
 
+    def state_after(self, task: Task, params: EnvParams, grid: GridModel, steps: int):
+        """The state after `steps` (static) agent steps without shedding, from reset."""
+        _, state = self.reset(None, task, params, grid)
+        zero = jnp.zeros(len(self.action_slots), grid.load_p0.dtype)
+        return jax.lax.fori_loop(0, steps, lambda _, s: self.step(s, zero, params, grid)[1],
+                                 state)
+
     def episode(self, policy_apply, policy_params, task: Task, params: EnvParams,
                 grid: GridModel, policy_carry=None, trace: bool = False):
         """One whole episode in `lax.scan` (un-batched; `rollout` vmaps it over tasks).

@@ -25,14 +25,7 @@ def state_at(study, env, spec: TaskSpec, steps: int):
     """(env state after `steps` agent steps without shedding, grid model (jnp arrays))."""
     grid = jax.tree.map(jnp.asarray, study.point(spec.operating_point))
     task = jax.tree.map(lambda a: a[0], study.batch([spec]).task)
-    zero = jnp.zeros(len(env.action_slots), grid.load_p0.dtype)
-
-    def run(task):
-        _, state = env.reset(None, task, study.params, grid)
-        return jax.lax.fori_loop(0, steps, lambda _, s: env.step(s, zero, study.params,
-                                                                 grid)[1], state)
-
-    return jax.jit(run)(task), grid
+    return jax.jit(lambda t: env.state_after(t, study.params, grid, steps))(task), grid
 
 
 @pytest.fixture(scope="module")
