@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: install run test bench clean
+.PHONY: install run test bench reproduce clean
 
 install:  ## create .venv and install the project with its test extras
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,10 @@ bench:  ## benchmarks; figures go to bench_results/*.json
 	$(PY) -m experiments.bench_train --out bench_results/train.json
 	$(PY) -m experiments.bench_cmld --out bench_results/cmld.json
 	$(PY) -m experiments.bench_latency --out bench_results/latency.json
+
+reproduce:  ## the paper's 39-bus figures and tables, REPORT.md in results/reproduce39
+	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.reproduce \
+		--study ieee39_fidvr --out results/reproduce39
 
 clean:
 	rm -rf $(VENV) results bench_results .pytest_cache

@@ -81,11 +81,20 @@ class TrainState:
     noise: jnp.ndarray
 
 
-def init_state(policy: Policy, config: ParsConfig) -> TrainState:
-    """θ = 0, empty statistics, the seed's key, α and ν at their initial values."""
+def init_state(policy: Policy, config: ParsConfig, seeds: int | None = None) -> TrainState:
+    """θ = 0, empty statistics, the seed's key, α and ν at their initial values. With
+    `seeds`, the states of seeds config.seed, config.seed + 1, ... stacked on a leading axis
+    (for `make_iteration(..., seeds=...)`)."""
+    if seeds is not None:
+        return jax.vmap(lambda seed: _init(policy, config, jax.random.PRNGKey(seed)))(
+            jnp.arange(config.seed, config.seed + seeds))
+    return _init(policy, config, jax.random.PRNGKey(config.seed))
+
+
+def _init(policy: Policy, config: ParsConfig, key) -> TrainState:
     return TrainState(theta=policy.initial_theta(),
-                      stats=RunningStats.empty(policy.spec.obs_size),
-                      key=jax.random.PRNGKey(config.seed), iteration=jnp.zeros((), jnp.int32),
+                      stats=RunningStats.empty(policy.spec.obs_size), key=key,
+                      iteration=jnp.zeros((), jnp.int32),
                       step_size=jnp.asarray(config.step_size, jnp.float32),
                       noise=jnp.asarray(config.noise, jnp.float32))
 
@@ -132,14 +141,16 @@ def clean_returns(returns):
 
 
 def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
-                   mesh: Mesh | None = None):
+                   mesh: Mesh | None = None, seeds: int | None = None):
     """`iteration(state, tasks, data) -> (state, metrics)`, jit-compiled (`iteration.compiled`).
 
     episode(policy_apply, policy_params, task, policy_carry, data) -> dict with "reward" ()
     and "policy_carry" (the final carry); tasks: pytree with a leading axis of n_tasks;
     data: any pytree the episode reads (passed through unchanged). sample(key) -> (m,) int
     task indices (default: m distinct tasks uniformly). The 2N perturbed vectors are sharded
-    over `mesh` (1-D, axis "batch"; default all devices).
+    over `mesh` (1-D, axis "batch"; default all devices). With `seeds`, the state (from
+    `init_state(..., seeds)`) and the metrics have a leading seed axis: independent trainings
+    of one configuration vmapped into one program, sharing the tasks and data.
     """
     m = config.tasks_per_iteration
     mesh = mesh or Mesh(np.array(jax.devices()), ("batch",))
@@ -182,7 +193,8 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
         return new, metrics
 
     replicated = NamedSharding(mesh, PartitionSpec())
-    compiled = jax.jit(iteration, in_shardings=replicated, out_shardings=replicated)
+    step = jax.vmap(iteration, in_axes=(0, None, None)) if seeds is not None else iteration
+    compiled = jax.jit(step, in_shardings=replicated, out_shardings=replicated)
 
     def run(state: TrainState, tasks, data=None):
         n_tasks = int(jax.tree.leaves(tasks)[0].shape[0])

@@ -103,22 +103,31 @@ def task_specs(study: Study, tasks: str):
     return TaskSet(buses, config.fault_durations, config.fault_starts).specs(study.n_points)
 
 
-def evaluate(study: Study, control: str, tasks: str = "test", plot_dir=None,
-             plot_count: int = 3) -> dict:
-    """The results dict of the module docstring (and figures in plot_dir)."""
+def controlled_env(study: Study, control: str):
+    """(env, policy_apply, params, carry) of controller `control` on the study: the env
+    stacks as many observations as a saved policy was trained with, whose layout is
+    checked."""
     saved = saved_policy(control)
     history = int(saved[2].get("history", 1)) if saved else None  # as the policy was trained
     env = study.env(**({"history": history} if history else {}))
     if saved:
         check_layout(control, saved[2], study, env)
+    return (env, *controller(control, env, saved))
+
+
+def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
+             plot_count: int = 3) -> dict:
+    """The results dict of the module docstring (and figures in plot_dir). `tasks`: a task
+    set name, a PNNL task JSON, or a list of TaskSpec."""
+    env, apply, policy_params, carry = controlled_env(study, control)
     for k, point in enumerate(study.points):
         unchecked = env.unchecked_buses(study.params, study.point(k))
         if unchecked:
             print(f"{study.name} {point.label}: observed buses {list(unchecked)} sit below the "
                   "recovery level before any fault; the recovery check leaves them out")
-    apply, policy_params, carry = controller(control, env, saved)
-    specs, out = rollout_specs(study, env, apply, policy_params, task_specs(study, tasks),
-                               carry, trace=plot_dir is not None)
+    chosen = tasks if isinstance(tasks, list) else task_specs(study, tasks)
+    specs, out = rollout_specs(study, env, apply, policy_params, chosen, carry,
+                               trace=plot_dir is not None)
     rows = [{"fault_bus": s.fault_bus, "fault_duration": s.fault_duration,
              "fault_start": s.fault_start, "operating_point": study.points[s.operating_point]
              .label, "point": s.operating_point, "reward": float(out["reward"][k]),

@@ -16,6 +16,9 @@ m tasks of the study's training set across its operating points, uniformly or st
                   is not always the one that generalises best to the test tasks)
   learning_curve.png
 `--resume` continues from the last checkpoint; `--iterations` is the run's total.
+`--seeds K` trains K seeds of the configuration as one vmapped program (a leading seed axis
+on the training state): metrics.jsonl then holds per-seed lists of reward_mean and
+reward_max (rollouts counts one seed's), and each policy folder holds seed0/ ... seedK-1/.
 Multi-host: --coordinator HOST:PORT --num-processes P --process-id I, or --distributed alone
 where `jax.distributed.initialize` can read them from the cluster environment; it is called
 before anything else touches JAX. Process 0 writes the files.
@@ -62,6 +65,9 @@ def parser(defaults: dict) -> argparse.ArgumentParser:
     p.add_argument("--iterations", type=int, default=defaults["iterations"],
                    help="total iterations of the run (with --resume: continue up to it)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seeds", type=int,
+                   help="K independent trainings (seeds --seed ... --seed + K − 1) vmapped "
+                        "into one compiled program; metrics per seed, policies in seedI/")
     p.add_argument("--episode", type=float, help="episode length, s (default: the study's)")
     p.add_argument("--out", default=f"runs/{study or 'study'}", help="output folder")
     p.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
@@ -101,10 +107,10 @@ class Trainer(NamedTuple):
 
 def build(study, policy_kind: str, hidden: tuple[int, ...], config, history: int | None = None,
           episode: float | None = None, task_set: str = "train", sampling: str = "uniform",
-          mesh=None) -> Trainer:
+          mesh=None, seeds: int | None = None) -> Trainer:
     """PARS on `study`'s task set `task_set`, episodes of `episode` s (default the study's),
     `history` observations stacked (default the study's), rollouts sharded over `mesh`
-    (default: all devices)."""
+    (default: all devices); `seeds` independent trainings in one program (`make_iteration`)."""
     from ars.pars import make_iteration
     from ars.policies import Policy, PolicySpec
     from jaxgrid.study import point_episode, stratified_sampler
@@ -118,7 +124,7 @@ def build(study, policy_kind: str, hidden: tuple[int, ...], config, history: int
     sample = (stratified_sampler(study.task_set(task_set), study.n_points,
                                  config.tasks_per_iteration)
               if sampling == "stratified" else None)
-    iteration = make_iteration(point_episode(env, params), policy, config, sample, mesh)
+    iteration = make_iteration(point_episode(env, params), policy, config, sample, mesh, seeds)
     return Trainer(iteration, policy, spec, study.batch(study.tasks(task_set)), study.models,
                    env.config)
 
@@ -141,8 +147,8 @@ def _train(args) -> int:
     config = ParsConfig(directions=args.directions, top=args.top, step_size=args.step_size,
                         noise=args.noise, decay=args.decay,
                         tasks_per_iteration=args.tasks_per_iteration, seed=args.seed)
-    if args.iterations < 1 or args.checkpoint_every < 1:
-        raise ValueError("--iterations and --checkpoint-every must be >= 1")
+    if args.iterations < 1 or args.checkpoint_every < 1 or (args.seeds or 1) < 1:
+        raise ValueError("--iterations, --checkpoint-every and --seeds must be >= 1")
     out = Path(args.out)
     saved_study = out / "study.toml"
     study = study_from_args(args, str(saved_study) if args.resume and saved_study.is_file()
@@ -156,19 +162,23 @@ def _train(args) -> int:
         raise ValueError(f"--resume: the checkpoint in {out} is at iteration "
                          f"{mgr.latest_step()}, past --iterations {args.iterations}")
     trainer = build(study, args.policy, hidden, config, args.history, args.episode,
-                    args.task_set, args.task_sampling)
+                    args.task_set, args.task_sampling, seeds=args.seeds)
     env_config = trainer.env_config
     run_info = {"study": study.name, "points": [p.label for p in study.points],
                 "task_set": args.task_set, "task_sampling": args.task_sampling,
                 "layout": layout(env_config), "history": env_config.history,
-                "episode": env_config.episode, "config": dataclasses.asdict(config)}
-    state, log = init_state(trainer.policy, config), []
+                "episode": env_config.episode, "config": dataclasses.asdict(config),
+                "seeds": args.seeds}
+    state, log = init_state(trainer.policy, config, args.seeds), []
     if args.resume:
         restored = checkpoint.restore_latest(mgr, state)
         if restored is None:
             raise ValueError(f"--resume: no checkpoint in {out / 'checkpoints'}")
         state, meta = restored
         log = meta["metrics"]
+        if meta.get("seeds") != args.seeds:
+            raise ValueError(f"--resume: the run in {out} has --seeds {meta.get('seeds')}, "
+                             f"not {args.seeds}")
     # every process computes the same replicated state; the first one writes the files
     # (orbax coordinates the checkpoints itself)
     primary = jax.process_index() == 0
@@ -176,7 +186,7 @@ def _train(args) -> int:
     if primary:
         write_study(study, saved_study)
         metrics_path.write_text("".join(json.dumps(m) + "\n" for m in log))
-    done = int(state.iteration)
+    done = int(np.max(state.iteration))
     rollouts = log[-1]["rollouts"] if log else 0
     bar = tqdm(total=args.iterations, initial=done, unit="it", disable=not primary)
     while done < args.iterations:
@@ -184,29 +194,50 @@ def _train(args) -> int:
         state, metrics = trainer.iteration(state, trainer.tasks, trainer.data)
         metrics = jax.device_get(metrics)
         wall = time.perf_counter() - start
-        done, rollouts = done + 1, rollouts + int(metrics["rollouts"])
-        row = {"iteration": done, "reward_mean": float(metrics["reward_mean"]),
-               "reward_max": float(metrics["reward_max"]), "wall_s": round(wall, 3),
-               "rollouts": rollouts}
+        done, rollouts = done + 1, rollouts + int(np.ravel(metrics["rollouts"])[0])
+        row = {"iteration": done, "reward_mean": np.asarray(metrics["reward_mean"]).tolist(),
+               "reward_max": np.asarray(metrics["reward_max"]).tolist(),
+               "wall_s": round(wall, 3), "rollouts": rollouts}
         log.append(row)
         if primary:
             with open(metrics_path, "a") as metrics_file:
                 metrics_file.write(json.dumps(row) + "\n")
-        bar.set_postfix(mean=f"{row['reward_mean']:.1f}", best=f"{row['reward_max']:.1f}",
-                        s_per_it=f"{wall:.2f}")
+        bar.set_postfix(mean=f"{np.mean(row['reward_mean']):.1f}",
+                        best=f"{np.max(row['reward_max']):.1f}", s_per_it=f"{wall:.2f}")
         bar.update(1)
         last = done == args.iterations
-        checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last)
+        checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last, step=done)
         if primary and (done % args.checkpoint_every == 0 or last):
-            checkpoint.save_policy(out / "policies" / f"{done:05d}", trainer.spec, state,
-                                   run_info)
+            _save_policies(out / "policies" / f"{done:05d}", trainer.spec, state, run_info,
+                           args.seeds)
     bar.close()
     if primary:
-        checkpoint.save_policy(out / "policy", trainer.spec, state, run_info)
+        _save_policies(out / "policy", trainer.spec, state, run_info, args.seeds)
         _learning_curve(log, out / "learning_curve.png", study.name)
-        print(f"{out}: {done} iterations, last mean reward {log[-1]['reward_mean']:.1f}, "
-              f"policy in {out / 'policy'}")
+        print(f"{out}: {done} iterations, last mean reward "
+              f"{np.mean(log[-1]['reward_mean']):.1f}, policy in {out / 'policy'}")
     return 0
+
+
+def _save_policies(folder: Path, spec, state, run_info: dict, seeds: int | None) -> None:
+    """The policy in `folder`, or with seeds each seed's in folder/seedI."""
+    from ars import checkpoint
+
+    if seeds is None:
+        checkpoint.save_policy(folder, spec, state, run_info)
+        return
+    for i in range(seeds):
+        checkpoint.save_policy(folder / f"seed{i}", spec, jax.tree.map(lambda a: a[i], state),
+                               {**run_info, "seed": run_info["config"]["seed"] + i})
+
+
+SMOOTHING = 20  # iterations: the tasks drawn change from one iteration to the next
+
+
+def smoothed(values: np.ndarray, window: int = SMOOTHING) -> np.ndarray:
+    """Trailing moving average along the last axis (..., n) -> (..., n − window + 1)."""
+    kernel = np.ones(window) / window
+    return np.apply_along_axis(lambda v: np.convolve(v, kernel, "valid"), -1, values)
 
 
 def _learning_curve(log: list[dict], path: Path, study: str) -> None:
@@ -215,13 +246,16 @@ def _learning_curve(log: list[dict], path: Path, study: str) -> None:
     import matplotlib.pyplot as plt
 
     it = np.array([m["iteration"] for m in log])
+    mean = np.array([m["reward_mean"] for m in log], float).reshape(len(log), -1).mean(1)
+    best = np.array([m["reward_max"] for m in log], float).reshape(len(log), -1).mean(1)
+    seeds = np.size(log[0]["reward_mean"])
+    over = f", mean of {seeds} seeds" if seeds > 1 else ""
     fig, ax = plt.subplots(figsize=(7, 4))
-    ax.plot(it, [m["reward_mean"] for m in log], label="mean over perturbed rollouts")
-    ax.plot(it, [m["reward_max"] for m in log], alpha=0.6, label="best direction")
-    window = 20  # iterations: the tasks drawn change from one iteration to the next
-    if len(log) > window:
-        smooth = np.convolve([m["reward_mean"] for m in log], np.ones(window) / window, "valid")
-        ax.plot(it[window - 1:], smooth, "k", lw=1.5, label=f"mean, {window}-iteration average")
+    ax.plot(it, mean, label="mean over perturbed rollouts" + over)
+    ax.plot(it, best, alpha=0.6, label="best direction" + over)
+    if len(log) > SMOOTHING:
+        ax.plot(it[SMOOTHING - 1:], smoothed(mean), "k", lw=1.5,
+                label=f"mean, {SMOOTHING}-iteration average")
     save_curve(fig, ax, path, "iteration", f"PARS on {study}")
 
 

@@ -1,0 +1,310 @@
+"""The runs behind `experiments.reproduce`, each cached in the output folder by its inputs.
+
+A run's folder (or file) under OUT/runs/ is named by what it is and a hash of everything it
+depends on: the study (its TOML text) and the run's settings. A finished run is reused; a
+training run that was interrupted resumes from its last checkpoint (the training commands'
+`--resume`); a changed input gives a new name, so nothing stale is ever read back.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from experiments.train import SMOOTHING, smoothed
+from jaxgrid.study import Study, load_study, write_study
+from jaxgrid.tasks import TaskSet
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """How large the experiments are (FULL: the paper's settings; QUICK: a pipeline check).
+
+    Attributes:
+      iterations: PARS iterations per training.  seeds: PARS seeds per configuration.
+      directions: N of fig6a.  sweep: N of fig6b.  sweep_large: N of fig9.
+      tasks_per_iteration: m.  episode: s, None for the study's (the study written to
+        OUT/study.toml carries it, so every run uses it).
+      test_tasks: test faults per (operating point, duration) kept, None for all; durations
+        kept: test_durations (None for all).
+      ppo_seeds: PPO trainings.  ppo_env_steps: per PPO training, None for as many as one
+        PARS training (iterations × 2N·m episodes × agent steps).  ppo_flags: extra flags.
+      mpc: MPC options (`baselines.mpc.parse_options`).
+      timing_iterations: iterations timed per device count (fig7).  processes: fig7's
+        `jax.distributed` process count (0: none).
+      latency_calls: calls timed per controller (tab3).  window: moving-average window, its.
+      policy, ppo_policy: an already trained PARS / PPO policy folder for the case studies,
+        fig12 and tab3's evaluations in place of training one (None: train).
+    """
+
+    iterations: int = 300
+    seeds: int = 5
+    directions: int = 16
+    sweep: tuple[int, ...] = (8, 16, 32, 64)
+    sweep_large: tuple[int, ...] = (32, 64, 128)
+    tasks_per_iteration: int = 9
+    episode: float | None = None
+    test_tasks: int | None = None
+    test_durations: int | None = None
+    ppo_seeds: int = 3
+    ppo_env_steps: int | None = None
+    ppo_flags: tuple[str, ...] = ()
+    mpc: str = ""
+    timing_iterations: int = 5
+    processes: int = 2
+    latency_calls: int = 200
+    window: int = SMOOTHING
+    policy: str | None = None
+    ppo_policy: str | None = None
+
+
+FULL = Settings()
+QUICK = Settings(iterations=2, seeds=2, directions=2, sweep=(2, 4), sweep_large=(2, 4),
+                 tasks_per_iteration=1, episode=1.5, test_tasks=2, test_durations=1,
+                 ppo_seeds=1, ppo_env_steps=32,
+                 ppo_flags=("--envs", "2", "--rollout-steps", "16", "--minibatches", "2",
+                            "--epochs", "1", "--eval-every", "1"),
+                 mpc="horizon=0.2,iterations=1,dt=0.02", timing_iterations=1, processes=0,
+                 latency_calls=3, window=1)
+
+# The paper's PARS presets: the 39-bus one for studies up to 100 buses, else the 300-bus one.
+PRESETS = {"small": {"hidden": "32,32", "decay": 0.99}, "large": {"hidden": "64,64",
+                                                                   "decay": 0.996}}
+
+
+def _hash(value) -> str:
+    return hashlib.sha1(json.dumps(value, sort_keys=True).encode()).hexdigest()[:10]
+
+
+class Runs:
+    """The study of a reproduction and its cached runs under `out`/runs."""
+
+    def __init__(self, study_spec: str, out: str | Path, settings: Settings):
+        self.out = Path(out)
+        self.settings = settings
+        self.study = _sized(load_study(study_spec), settings)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.study_file = self.out / "study.toml"
+        write_study(self.study, self.study_file)
+        self.study_key = _hash(self.study_file.read_text())
+        n_buses = len(self.study.points[0].case.buses.number)
+        self.preset = PRESETS["large" if n_buses > 100 else "small"]
+
+    def folder(self, kind: str, inputs: dict) -> Path:
+        """OUT/runs/KIND-HASH for `inputs` (with the study), and its inputs.json."""
+        folder = self.out / "runs" / f"{kind}-{_hash([self.study_key, inputs])}"
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "inputs.json").write_text(json.dumps(inputs, indent=1))
+        return folder
+
+    # --- PARS ------------------------------------------------------------------------------
+    def pars(self, policy: str, directions: int) -> Path:
+        """A finished `settings.seeds`-seed PARS training (one program, `--seeds`) of `policy`
+        with N = directions, b = N/2 and the preset's widths and decay; its folder."""
+        s = self.settings
+        flags = ["--policy", policy, "--hidden", "" if policy == "linear"
+                 else self.preset["hidden"], "--directions", str(directions),
+                 "--top", str(max(1, directions // 2)), "--decay", str(self.preset["decay"]),
+                 "--tasks-per-iteration", str(s.tasks_per_iteration),
+                 "--iterations", str(s.iterations), "--seeds", str(s.seeds)]
+        folder = self.folder(f"pars_{policy}_N{directions}", {"flags": flags})
+        if _rows(folder / "metrics.jsonl")[-1:] and (
+                _rows(folder / "metrics.jsonl")[-1]["iteration"] >= s.iterations
+                and (folder / "policy").is_dir()):
+            return folder
+        from experiments.train import main as train
+        resume = ["--resume"] if any((folder / "checkpoints").glob("[0-9]*")) else []
+        if train(["--study", str(self.study_file), *flags, "--out", str(folder), *resume]):
+            raise RuntimeError(f"PARS training in {folder} failed")
+        return folder
+
+    def pars_curves(self, folder: Path) -> dict:
+        """Per-seed learning curves of a PARS run: iteration (n,), reward (seeds, n) (mean over
+        the iteration's perturbed rollouts), wall_s (n,) cumulative, episodes (n,) per seed."""
+        rows = _rows(folder / "metrics.jsonl")
+        return {"iteration": np.array([r["iteration"] for r in rows]),
+                "reward": np.array([r["reward_mean"] for r in rows], float).reshape(
+                    len(rows), -1).T,
+                "wall_s": np.cumsum([r["wall_s"] for r in rows]),
+                "episodes": np.array([r["rollouts"] for r in rows])}
+
+    def best_seed(self, folder: Path) -> str:
+        """controller spec of the seed whose smoothed final training reward is highest."""
+        curves = self.pars_curves(folder)
+        window = min(self.settings.window, curves["reward"].shape[1])
+        final = smoothed(curves["reward"], window)[:, -1]
+        return f"policy:{folder / 'policy' / f'seed{int(np.argmax(final))}'}"
+
+    # --- PPO -------------------------------------------------------------------------------
+    def ppo(self, seed: int, env_steps: int) -> Path:
+        """A finished PPO training (`experiments.train_ppo`, the study's Table II defaults) of
+        `env_steps` environment steps; its folder."""
+        s = self.settings
+        flags = ["--env-steps", str(env_steps), "--seed", str(seed), *s.ppo_flags]
+        folder = self.folder(f"ppo_seed{seed}", {"flags": flags})
+        if (folder / "policy").is_dir():
+            return folder
+        from experiments.train_ppo import main as train_ppo
+        resume = ["--resume"] if any((folder / "checkpoints").glob("[0-9]*")) else []
+        if train_ppo(["--study", str(self.study_file), *flags, "--out", str(folder), *resume]):
+            raise RuntimeError(f"PPO training in {folder} failed")
+        return folder
+
+    # --- evaluations -----------------------------------------------------------------------
+    def evaluation(self, control: str, tasks: str = "test") -> dict:
+        """`experiments.evaluate` of `control` on a task set, cached."""
+        from experiments.evaluate import evaluate
+
+        path = self.folder("eval", {"controller": _identity(control), "tasks": tasks,
+                                    "mpc": self.settings.mpc if control == "mpc" else None})
+        path = path / "result.json"
+        if path.is_file():
+            return json.loads(path.read_text())
+        spec = f"mpc:{self.settings.mpc}" if control == "mpc" and self.settings.mpc else control
+        result = evaluate(self.study, spec, tasks)
+        path.write_text(json.dumps(result, indent=1))
+        return result
+
+    def trace(self, control: str, fault_bus: int, duration: float) -> dict:
+        """One episode of `control` on a fault at `fault_bus` lasting `duration` s at the first
+        operating point, cached: t (s), vm (steps, observed buses) p.u., shed_mw cumulative,
+        reward, recovered, observed (bus numbers)."""
+        from experiments.evaluate import controlled_env
+        from jaxgrid.study import rollout_specs
+        from jaxgrid.tasks import TaskSpec
+
+        path = self.folder("trace", {"controller": _identity(control), "bus": fault_bus,
+                                     "duration": duration,
+                                     "mpc": self.settings.mpc if control == "mpc" else None})
+        path = path / "trace.json"
+        if path.is_file():
+            return json.loads(path.read_text())
+        spec = f"mpc:{self.settings.mpc}" if control == "mpc" and self.settings.mpc else control
+        env, apply, params, carry = controlled_env(self.study, spec)
+        task = TaskSpec(fault_bus, duration, self.study.task_set("test").fault_starts[0])
+        _, out = rollout_specs(self.study, env, apply, params, [task], carry, trace=True)
+        steps = out["vm"].shape[1]
+        result = {"t": ((np.arange(steps) + 1) * env.config.agent_dt).tolist(),
+                  "vm": out["vm"][0].tolist(),
+                  "shed_mw": (np.cumsum(out["shed_step_pu"][0]) * self.study.base_mva).tolist(),
+                  "reward": float(out["reward"][0]), "recovered": bool(out["recovered"][0]),
+                  "observed": list(env.config.observed_buses), "fault_start": task.fault_start}
+        path.write_text(json.dumps(result))
+        return result
+
+    # --- timing ----------------------------------------------------------------------------
+    def iteration_seconds(self, devices: int) -> float:
+        """Median seconds of one LSTM PARS iteration (N = settings.directions, one seed) on a
+        mesh of the first `devices` CPU devices of this process, after its compile."""
+        import jax
+        from jax.sharding import Mesh
+
+        from ars.pars import ParsConfig, init_state
+        from experiments.train import build
+
+        s = self.settings
+        config = ParsConfig(directions=s.directions, top=max(1, s.directions // 2),
+                            tasks_per_iteration=s.tasks_per_iteration)
+        mesh = Mesh(np.array(jax.devices()[:devices]), ("batch",))
+        trainer = build(self.study, "lstm", _widths(self.preset["hidden"]), config, mesh=mesh)
+        state = init_state(trainer.policy, config)
+        state, _ = jax.block_until_ready(trainer.iteration(state, trainer.tasks, trainer.data))
+        times = []
+        for _ in range(s.timing_iterations):
+            start = time.perf_counter()
+            state, _ = jax.block_until_ready(trainer.iteration(state, trainer.tasks,
+                                                               trainer.data))
+            times.append(time.perf_counter() - start)
+        return float(np.median(times))
+
+    def process_seconds(self, processes: int) -> float:
+        """Median seconds per iteration of the same training as `iteration_seconds` run as
+        `processes` processes of one CPU device each, joined by `jax.distributed` on loopback
+        (`experiments.train --coordinator`); the first iteration (compile) is left out."""
+        s = self.settings
+        folder = self.folder("processes", {"processes": processes, "settings": [
+            s.directions, s.tasks_per_iteration, s.episode, s.timing_iterations]})
+        with socket.socket() as probe:
+            probe.bind(("127.0.0.1", 0))
+            port = probe.getsockname()[1]
+        env = dict(os.environ, PYTHONPATH=str(REPO),
+                   XLA_FLAGS="--xla_force_host_platform_device_count=1")
+        flags = ["--study", str(self.study_file), "--policy", "lstm",
+                 "--hidden", self.preset["hidden"], "--directions", str(s.directions),
+                 "--top", str(max(1, s.directions // 2)),
+                 "--tasks-per-iteration", str(s.tasks_per_iteration),
+                 "--iterations", str(s.timing_iterations + 1), "--checkpoint-every", "1000",
+                 "--out", str(folder / "run"), "--coordinator", f"127.0.0.1:{port}",
+                 "--num-processes", str(processes)]
+        shutil.rmtree(folder / "run", ignore_errors=True)  # a timing starts afresh
+        procs = [subprocess.Popen([sys.executable, "-m", "experiments.train", *flags,
+                                   "--process-id", str(i)], cwd=REPO, env=env,
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                 for i in range(processes)]
+        logs = [proc.communicate(timeout=3600)[0] for proc in procs]
+        for i, (proc, log) in enumerate(zip(procs, logs)):
+            if proc.returncode:
+                raise RuntimeError(f"process {i} of {processes} failed:\n{log[-2000:]}")
+        return float(np.median([r["wall_s"] for r in _rows(folder / "run" / "metrics.jsonl")
+                                [1:]]))
+
+
+def convergence_iteration(iterations: np.ndarray, reward: np.ndarray, window: int,
+                          tolerance: float = 0.02) -> int | None:
+    """The study's rule: the first iteration from which the `window`-iteration moving
+    average of `reward` (n,) stays within `tolerance` (relative) of its final value; None
+    if it never settles before the end."""
+    if len(reward) < window:
+        return None
+    average = smoothed(np.asarray(reward, float), window)
+    inside = np.abs(average - average[-1]) <= tolerance * abs(average[-1])
+    outside = np.flatnonzero(~inside)
+    first = 0 if outside.size == 0 else int(outside[-1]) + 1
+    return int(iterations[window - 1 + first]) if first < len(average) else None
+
+
+def _sized(study: Study, settings: Settings) -> Study:
+    """The study with the settings' episode length and test-set size."""
+    definition = study.definition
+    env = (definition.env if settings.episode is None
+           else dataclasses.replace(definition.env, episode=settings.episode))
+    tasks = dict(definition.tasks)
+    if settings.test_tasks is not None or settings.test_durations is not None:
+        test = tasks["test"]
+        tasks["test"] = TaskSet(test.fault_buses[:settings.test_tasks],
+                                test.fault_durations[:settings.test_durations],
+                                test.fault_starts, test.operating_points)
+    return dataclasses.replace(study, definition=dataclasses.replace(
+        definition, env=env, tasks=tasks))
+
+
+def _identity(control: str) -> str:
+    """A controller spec with a policy path replaced by the policy's content hash, so an
+    evaluation is recomputed when the policy changes."""
+    kind, _, path = control.partition(":")
+    if kind not in ("policy", "ppo"):
+        return control
+    digest = hashlib.sha1()
+    for file in sorted(Path(path).glob("**/*")):
+        if file.is_file():
+            digest.update(file.read_bytes())
+    return f"{kind}:{digest.hexdigest()[:10]}"
+
+
+def _widths(hidden: str) -> tuple[int, ...]:
+    return tuple(int(h) for h in hidden.split(",") if h)
+
+
+def _rows(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []

@@ -1,0 +1,118 @@
+"""Reproduce the PARS paper's figures and tables with one command, the paper's values beside.
+
+    python -m experiments.reproduce --study ieee39_fidvr|FILE.toml --out results/repro39 \
+        [--only fig6a,fig8,...] [--quick] [--iterations N] [--seeds K] [--ppo-seeds K]
+        [--policy DIR/policy] [--ppo-policy DIR/policy]
+    make reproduce
+
+Experiments (`experiments.repro_figures`): fig6a (linear / FNN / LSTM learning curves, mean ±
+std over seeds), fig6b (LSTM, N = 8/16/32/64), fig7 (speed-up over devices and processes),
+fig8 (39-bus case study, PARS vs UVLS), fig9 (LSTM, N = 32/64/128), fig10_11 (PARS vs PPO over
+wall time and environment steps), fig12 (per-task reward differences PARS − UVLS / MPC /
+PPO on the test set), tab3 (decision time), fig13 (300-bus case study, all four
+controllers). Every experiment runs on the given study; the paper's values are for the case
+the report names. Seeds of one configuration train as one vmapped program.
+
+Output folder: OUT/<id>.png and OUT/<id>.json (numbers, settings, wall time) per
+experiment, OUT/REPORT.md (every figure; our numbers beside the paper's), OUT/runs/ (the
+trainings and evaluations, named by a hash of their inputs: reused when finished, resumed
+when interrupted, recomputed when an input changes). `--quick` runs everything with tiny
+settings (2 iterations, 1.5-s episodes, a few test tasks) as a check of the pipeline.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+from experiments.repro_figures import EXPERIMENTS, PAPER
+from experiments.repro_runs import FULL, QUICK, Runs
+
+
+def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides) -> dict:
+    """Run the experiments `only` (default all) into `out`; write REPORT.md. `overrides`:
+    fields of `repro_runs.Settings`. Returns {id: result}."""
+    unknown = sorted(set(only or ()) - set(EXPERIMENTS))
+    if unknown:
+        raise ValueError(f"--only {','.join(unknown)}: unknown; the experiments are "
+                         f"{', '.join(EXPERIMENTS)}")
+    settings = dataclasses.replace(QUICK if quick else FULL, **overrides)
+    runs = Runs(study, out, settings)
+    results = {}
+    for name, experiment in EXPERIMENTS.items():
+        if only and name not in only:
+            continue
+        print(f"--- {name}: {PAPER[name]['title']}", flush=True)
+        start = time.perf_counter()
+        result = experiment(runs, runs.out / f"{name}.png")
+        result.update(id=name, figure=f"{name}.png", wall_s=round(time.perf_counter() - start, 1),
+                      study=runs.study.name, quick=quick)
+        (runs.out / f"{name}.json").write_text(json.dumps(result, indent=1))
+        results[name] = result
+    write_report(runs.out, settings, quick)
+    return results
+
+
+def write_report(out: Path, settings, quick: bool) -> None:
+    """REPORT.md from every OUT/<id>.json there (this run's and earlier ones)."""
+    lines = ["# PARS paper reproduction", "",
+             f"Settings: {'--quick (a pipeline check, not results)' if quick else 'full'}; "
+             f"{json.dumps(dataclasses.asdict(settings))}.", "",
+             "Each experiment ran on the study named under it; the paper's values are for the "
+             "paper's case and settings, given beside ours.", ""]
+    for name in EXPERIMENTS:
+        path = out / f"{name}.json"
+        if not path.is_file():
+            continue
+        result, paper = json.loads(path.read_text()), PAPER[name]
+        lines += [f"## {name}: {paper['title']}", "", f"![{name}]({result['figure']})", "",
+                  f"- ours: {result['study']}, {result['settings']}; {result['wall_s']} s here"
+                  + (" (--quick)" if result.get("quick") else ""),
+                  f"- paper: {paper['case']}, {paper['settings']}", "",
+                  "| quantity | ours | paper |", "| --- | --- | --- |"]
+        keys = list(result["numbers"]) + [k for k in paper["values"]
+                                          if k not in result["numbers"]]
+        for key in keys:
+            lines.append(f"| {key} | {_cell(result['numbers'].get(key))} | "
+                         f"{_cell(paper['values'].get(key))} |")
+        lines.append("")
+    (out / "REPORT.md").write_text("\n".join(lines))
+
+
+def _cell(value) -> str:
+    return "" if value is None else str(value)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m experiments.reproduce",
+                                description=__doc__.split("\n")[0])
+    p.add_argument("--study", default="ieee39_fidvr", help="built-in study name or study TOML")
+    p.add_argument("--out", default="results/reproduce", help="output folder")
+    p.add_argument("--only", help=f"comma-separated subset of {','.join(EXPERIMENTS)}")
+    p.add_argument("--quick", action="store_true", help="tiny settings: a pipeline check")
+    p.add_argument("--iterations", type=int, help="PARS iterations per training")
+    p.add_argument("--seeds", type=int, help="PARS seeds per configuration")
+    p.add_argument("--ppo-seeds", type=int, help="PPO trainings for fig10_11")
+    p.add_argument("--policy", help="a trained PARS policy folder for fig8, fig12, fig13 "
+                                    "(default: train one)")
+    p.add_argument("--ppo-policy", help="a trained PPO policy folder for fig12, fig13 "
+                                        "(default: train one)")
+    args = p.parse_args(argv)
+    overrides = {k: v for k, v in (("iterations", args.iterations), ("seeds", args.seeds),
+                                   ("ppo_seeds", args.ppo_seeds), ("policy", args.policy),
+                                   ("ppo_policy", args.ppo_policy)) if v is not None}
+    only = [s.strip() for s in args.only.split(",") if s.strip()] if args.only else None
+    try:
+        run(args.study, args.out, only, args.quick, **overrides)
+    except (ValueError, KeyError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"{Path(args.out) / 'REPORT.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
