@@ -287,6 +287,8 @@ def fig12(runs: Runs, path) -> dict:
         difference = ours - np.array([t["reward"] for t in result["tasks"]])
         better = float(np.mean(difference > 0))
         numbers[f"PARS better than {label} on"] = f"{100 * better:.2f} %"
+        numbers[f"PARS at least as good as {label} on"] = (
+            f"{100 * float(np.mean(difference >= 0)):.2f} %")
         numbers[f"mean reward, {label}"] = round(result["summary"]["mean_reward"], 1)
         ax.hist(difference, bins=20)
         ax.axvline(0, color="k", lw=1)
