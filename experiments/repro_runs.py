@@ -264,8 +264,8 @@ def convergence_iteration(iterations: np.ndarray, reward: np.ndarray, window: in
                           tolerance: float = 0.02) -> int | None:
     """The study's rule: the first iteration from which the `window`-iteration moving
     average of `reward` (n,) stays within `tolerance` (relative) of its final value; None
-    if it never settles before the end."""
-    if len(reward) < window:
+    for a run shorter than two windows (too short to tell)."""
+    if len(reward) < 2 * window:
         return None
     average = smoothed(np.asarray(reward, float), window)
     inside = np.abs(average - average[-1]) <= tolerance * abs(average[-1])
