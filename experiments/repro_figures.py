@@ -11,7 +11,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from experiments.repro_runs import Runs, convergence_iteration
+from experiments.repro_runs import Runs, convergence_iteration, metrics_rows
 from experiments.train import smoothed
 
 PAPER = {
@@ -84,9 +84,9 @@ def _curves(runs: Runs, configs: list[tuple[str, int, str]], title: str, path) -
         numbers[f"best average reward, {label}"] = round(float(average.max()), 1)
         numbers[f"converged at iteration, {label}"] = convergence_iteration(
             it, mean, min(window, len(mean)))
+        wall = np.diff(curves["wall_s"], prepend=0.0)  # per iteration; the first compiles
         numbers[f"s per iteration ({reward.shape[0]} seeds in one program), {label}"] = round(
-            float(np.diff(curves["wall_s"], prepend=0.0)[1:].mean()
-                  if len(it) > 1 else curves["wall_s"][0]), 2)
+            float(wall[1:].mean() if len(wall) > 1 else wall[0]), 2)
     ax.set_xlabel("iteration")
     ax.set_ylabel("reward per episode (mean of the perturbed rollouts)")
     ax.set_title(f"{title} — {runs.study.name}, mean ± std over {runs.settings.seeds} seeds")
@@ -227,7 +227,7 @@ def fig10_11(runs: Runs, path) -> dict:
     s = runs.settings
     steps = int(round(runs.study.config.episode / runs.study.config.agent_dt))
     pars = runs.pars_curves(runs.pars("lstm", s.directions))
-    ppo_rows = [_ppo_rows(runs.ppo(seed, _ppo_steps(runs))) for seed in range(s.ppo_seeds)]
+    ppo_rows = [metrics_rows(runs.ppo(seed, _ppo_steps(runs)) / "metrics.jsonl") for seed in range(s.ppo_seeds)]
     n = min(len(rows) for rows in ppo_rows)
     ppo_reward = np.array([[r["reward_train"] if r["reward_train"] is not None else np.nan
                             for r in rows[:n]] for rows in ppo_rows], float)
@@ -268,11 +268,6 @@ def fig10_11(runs: Runs, path) -> dict:
     return {"numbers": numbers, "settings": f"PARS LSTM N = {s.directions}, "
             f"{s.iterations} iterations × {s.seeds} seeds in one program; PPO {s.ppo_seeds} "
             f"seeds × {_ppo_steps(runs)} env steps (Table II settings), one after another"}
-
-
-def _ppo_rows(folder) -> list[dict]:
-    import json
-    return [json.loads(line) for line in (folder / "metrics.jsonl").read_text().splitlines()]
 
 
 def fig12(runs: Runs, path) -> dict:

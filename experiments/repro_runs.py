@@ -119,9 +119,8 @@ class Runs:
                  "--tasks-per-iteration", str(s.tasks_per_iteration),
                  "--iterations", str(s.iterations), "--seeds", str(s.seeds)]
         folder = self.folder(f"pars_{policy}_N{directions}", {"flags": flags})
-        if _rows(folder / "metrics.jsonl")[-1:] and (
-                _rows(folder / "metrics.jsonl")[-1]["iteration"] >= s.iterations
-                and (folder / "policy").is_dir()):
+        rows = metrics_rows(folder / "metrics.jsonl")
+        if rows and rows[-1]["iteration"] >= s.iterations and (folder / "policy").is_dir():
             return folder
         from experiments.train import main as train
         resume = ["--resume"] if any((folder / "checkpoints").glob("[0-9]*")) else []
@@ -132,7 +131,7 @@ class Runs:
     def pars_curves(self, folder: Path) -> dict:
         """Per-seed learning curves of a PARS run: iteration (n,), reward (seeds, n) (mean over
         the iteration's perturbed rollouts), wall_s (n,) cumulative, episodes (n,) per seed."""
-        rows = _rows(folder / "metrics.jsonl")
+        rows = metrics_rows(folder / "metrics.jsonl")
         return {"iteration": np.array([r["iteration"] for r in rows]),
                 "reward": np.array([r["reward_mean"] for r in rows], float).reshape(
                     len(rows), -1).T,
@@ -166,13 +165,11 @@ class Runs:
         """`experiments.evaluate` of `control` on a task set, cached."""
         from experiments.evaluate import evaluate
 
-        path = self.folder("eval", {"controller": _identity(control), "tasks": tasks,
-                                    "mpc": self.settings.mpc if control == "mpc" else None})
+        path = self.folder("eval", {**self._controller_inputs(control), "tasks": tasks})
         path = path / "result.json"
         if path.is_file():
             return json.loads(path.read_text())
-        spec = f"mpc:{self.settings.mpc}" if control == "mpc" and self.settings.mpc else control
-        result = evaluate(self.study, spec, tasks)
+        result = evaluate(self.study, self._spec(control), tasks)
         path.write_text(json.dumps(result, indent=1))
         return result
 
@@ -184,14 +181,12 @@ class Runs:
         from jaxgrid.study import rollout_specs
         from jaxgrid.tasks import TaskSpec
 
-        path = self.folder("trace", {"controller": _identity(control), "bus": fault_bus,
-                                     "duration": duration,
-                                     "mpc": self.settings.mpc if control == "mpc" else None})
+        path = self.folder("trace", {**self._controller_inputs(control), "bus": fault_bus,
+                                     "duration": duration})
         path = path / "trace.json"
         if path.is_file():
             return json.loads(path.read_text())
-        spec = f"mpc:{self.settings.mpc}" if control == "mpc" and self.settings.mpc else control
-        env, apply, params, carry = controlled_env(self.study, spec)
+        env, apply, params, carry = controlled_env(self.study, self._spec(control))
         task = TaskSpec(fault_bus, duration, self.study.task_set("test").fault_starts[0])
         _, out = rollout_specs(self.study, env, apply, params, [task], carry, trace=True)
         steps = out["vm"].shape[1]
@@ -202,6 +197,15 @@ class Runs:
                   "observed": list(env.config.observed_buses), "fault_start": task.fault_start}
         path.write_text(json.dumps(result))
         return result
+
+    def _spec(self, control: str) -> str:
+        """The controller spec `experiments.evaluate` takes: "mpc" with the settings' options."""
+        return f"mpc:{self.settings.mpc}" if control == "mpc" and self.settings.mpc else control
+
+    def _controller_inputs(self, control: str) -> dict:
+        """What a cached result of `control` depends on besides the study."""
+        return {"controller": _identity(control),
+                "mpc": self.settings.mpc if control == "mpc" else None}
 
     # --- timing ----------------------------------------------------------------------------
     def iteration_seconds(self, devices: int) -> float:
@@ -256,7 +260,7 @@ class Runs:
         for i, (proc, log) in enumerate(zip(procs, logs)):
             if proc.returncode:
                 raise RuntimeError(f"process {i} of {processes} failed:\n{log[-2000:]}")
-        return float(np.median([r["wall_s"] for r in _rows(folder / "run" / "metrics.jsonl")
+        return float(np.median([r["wall_s"] for r in metrics_rows(folder / "run" / "metrics.jsonl")
                                 [1:]]))
 
 
@@ -306,5 +310,6 @@ def _widths(hidden: str) -> tuple[int, ...]:
     return tuple(int(h) for h in hidden.split(",") if h)
 
 
-def _rows(path: Path) -> list[dict]:
+def metrics_rows(path: Path) -> list[dict]:
+    """The lines of a metrics.jsonl ([] if there is none yet)."""
     return [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
