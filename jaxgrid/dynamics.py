@@ -54,11 +54,14 @@ def load_injection(model: GridModel, x: GridState, v_load):
     return total
 
 
-def solve_network(model: GridModel, x: GridState, fault: network.Fault, active):
-    """Slot voltages (n_slot,), slot injections (n_slot,), residual, and EMFs (n_gen,)."""
+def solve_network(model: GridModel, x: GridState, fault: network.Fault, active,
+                  sweeps: int | None = None):
+    """Slot voltages (n_slot,), slot injections (n_slot,), residual, and EMFs (n_gen,), by
+    `sweeps` fixed-point sweeps (static; default the model's) from x.v."""
     emf = machine_emf(model, x)
     v, current, residual = network.solve(model.network, fault, active, emf * model.y_norton,
-                                         partial(load_injection, model, x), x.v, model.sweeps)
+                                         partial(load_injection, model, x), x.v,
+                                         sweeps or model.sweeps)
     return v, current, residual, emf
 
 

@@ -250,7 +250,7 @@ class LoadSheddingEnv:
         """(obs (history·n_obs,), state) at t = 0; `key` is unused (the grid is deterministic)."""
         del key
         x = grid.initial
-        real = jnp.real(grid.network.z_ss).dtype
+        real = grid.network.real_dtype
         vm, obs = self._observe(grid, x, jnp.zeros((), real), task, self._fault(grid, task))
         history = jnp.tile(obs, (self.config.history, 1))
         check = (vm >= params.recovery_level) & self.recovery_mask
@@ -262,7 +262,7 @@ class LoadSheddingEnv:
     def step(self, state: EnvState, action, params: EnvParams, grid: GridModel):
         """(obs, state, reward, done, info) after one agent step with `action` (n_action,)."""
         cfg, task = self.config, state.task
-        real = jnp.real(grid.network.z_ss).dtype
+        real = grid.network.real_dtype
         t = state.step.astype(real) * cfg.agent_dt
         request = -clip_closed(action, params.action_low, params.action_high)  # >= 0
         left = state.grid.load_left[self.action_slots]

@@ -3,7 +3,7 @@
 One rollout is one jit-compiled function of (model, task); `simulate_batch` vmaps it over a
 batch of tasks (fault bus, times, impedance, load changes), so tasks with different fault
 buses share one compiled step. A rollout whose state becomes non-finite or leaves physical
-bounds is frozen at its last good state and flagged (`Trajectory.diverged`); the rest of a
+bounds is frozen at its last good sample and flagged (`Trajectory.diverged`); the rest of a
 batch is untouched. Everything is differentiable (discrete logic through `jnp.where`).
 
 CLI: python -m jaxgrid.simulate --raw R --dyr D [--fault-bus B ...] --t-end T --dt DT --out run.npz
@@ -25,6 +25,9 @@ from jaxgrid import network
 from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, machine_state, solve_network,
                               update_loads)
 from jaxgrid.grid import GridModel, GridState
+
+
+OBSERVE_SWEEPS = 4  # network sweeps of a sample (`observe`): the accuracy reference's
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,7 +103,8 @@ class Trajectory:
       residual: (n_t,) largest network fixed-point residual since the previous sample, p.u.
       load_left: (n_t, n_load) connected fraction of each load slot's initial load.
       load_flags: per load-model group, {flag: (n_t, n_unit)} (e.g. ACMTBLU1 run_a, kcon).
-      diverged: () bool.  diverged_at: () s, inf if the rollout never diverged.
+      diverged: () bool.  diverged_at: () s, the end of the first sample whose state was
+        non-finite or out of bounds (inf if none was).
       final: GridState at t_end (the frozen state if diverged).
     """
 
@@ -201,9 +205,14 @@ def within_bounds(x: GridState, bounds: Bounds):
 
 
 def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault):
-    """(vm (n_bus,), va (n_bus,), Δω (n_gen,), δ (n_gen,), load_left, load_flags) at time t."""
+    """(vm (n_bus,), va (n_bus,), Δω (n_gen,), δ (n_gen,), load_left, load_flags) at time t.
+
+    The network is solved with at least `OBSERVE_SWEEPS` sweeps: a sample that falls on a
+    fault's start or clearing sees the new topology from the warm start of the step before,
+    which one or two sweeps leave far from converged (this costs one solution per sample).
+    """
     active = fault_active(task, t, dt)
-    _, current, _, _ = solve_network(model, x, fault, active)
+    _, current, _, _ = solve_network(model, x, fault, active, max(model.sweeps, OBSERVE_SWEEPS))
     v = network.bus_voltages(model.network, fault, active, current)
     return (jnp.abs(v), jnp.angle(v), machine_state(x, "dw"), machine_state(x, "delta"),
             x.load_left, x.load_flags)
@@ -232,23 +241,25 @@ def advance(model: GridModel, x: GridState, health: Health, first_step, n: int, 
             task: Task, fault: network.Fault, bounds: Bounds):
     """n Heun steps from step index `first_step` (traced int); (state, health) after them.
 
-    A step that leaves `bounds` (or is non-finite) freezes the state and flags divergence.
+    Divergence is checked once, after the n steps (an agent step or an output sample), not
+    at every step: a state that is non-finite or outside `bounds` then is discarded, the
+    rollout stays frozen at `x` (its last good checked state) and is flagged, with
+    `diverged_at` the end of these n steps.
     """
-    real = jnp.real(model.network.z_ss).dtype
+    real = model.network.real_dtype
 
     def step(carry, k):
-        x, h = carry
-        t = k.astype(real) * dt
-        new, r = heun_step(model, x, t, dt, task, fault)
-        bad = ~within_bounds(new, bounds) & ~h.diverged
-        keep = h.diverged | bad
-        x = jax.tree.map(lambda old, nw: jnp.where(keep, old, nw), x, new)
-        h = Health(h.diverged | bad, jnp.where(bad, t + dt, h.diverged_at),
-                   jnp.maximum(h.residual, r))
-        return (x, h), None
+        x, residual = carry
+        new, r = heun_step(model, x, k.astype(real) * dt, dt, task, fault)
+        return (new, jnp.maximum(residual, r)), None
 
-    (x, health), _ = jax.lax.scan(step, (x, health), first_step + jnp.arange(n))
-    return x, health
+    (new, residual), _ = jax.lax.scan(step, (x, health.residual), first_step + jnp.arange(n))
+    bad = ~within_bounds(new, bounds) & ~health.diverged
+    keep = health.diverged | bad
+    t_end = (first_step + n).astype(real) * dt
+    x = jax.tree.map(lambda old, nw: jnp.where(keep, old, nw), x, new)
+    return x, Health(health.diverged | bad, jnp.where(bad, t_end, health.diverged_at),
+                     jnp.where(keep, health.residual, residual))
 
 
 @partial(jax.jit, static_argnames=("n_samples", "decimation", "dt", "bounds"))
@@ -256,7 +267,7 @@ def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: f
             bounds: Bounds = Bounds()) -> Trajectory:
     """Simulate n_samples × decimation steps of dt seconds; sample every `decimation` steps."""
     fault = network.fault_view(model.network, task.fault_bus, task.fault_z)
-    real = jnp.real(model.network.z_ss).dtype
+    real = model.network.real_dtype
 
     def sample(carry, k):
         x, h = carry

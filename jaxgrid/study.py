@@ -87,14 +87,18 @@ class GridSource:
     sim_config: str | None = None
 
 
+FILE_SWEEPS = 2  # network sweeps of a study from files (its step's accuracy is not measured)
+
+
 @dataclasses.dataclass(frozen=True)
 class CompileSettings:
     """How every operating point is compiled (`jaxgrid.compile.CompileOptions`; the action
-    buses become the load slots)."""
+    buses become the load slots). sweeps None: the source's (a built-in study's measured
+    value, `FILE_SWEEPS` for files); a built study's definition holds the value used."""
 
     strict: bool = True
     precision: str = "float32"
-    sweeps: int = 2
+    sweeps: int | None = None
     motors: MotorOptions = MotorOptions()
     loads: LoadSplit = LoadSplit()
     composite: CompositeOptions = CompositeOptions()
@@ -357,6 +361,7 @@ def build(grid: GridSource, name: str | None = None,
         if key not in env_values:
             raise ValueError(f"study: no {key}: give a task_config or [env] {key}")
     env_values["action_buses"] = tuple(env_values["action_buses"])
+    compile = dataclasses.replace(compile, sweeps=compile.sweeps or defaults["sweeps"])
     options = CompileOptions(strict=compile.strict, loads=compile.loads,
                              load_buses=env_values["action_buses"], motors=compile.motors,
                              composite=compile.composite, precision=compile.precision,
@@ -404,7 +409,7 @@ def _builtin_points(grid: GridSource):
         "name": grid.builtin,
         "env": {"observed_buses": first.observed_buses, "action_buses": first.action_buses,
                 "dt": first.dt},
-        "params": dict(first.reward),
+        "params": dict(first.reward), "sweeps": first.sweeps,
         "tasks": {k: {"fault_buses": tuple(b), "fault_durations": tuple(d)}
                   for k, (b, d) in first.task_sets.items()}}
     # machine data and MBASE are those of level 1 at every level: one DYR serves all points
@@ -426,7 +431,7 @@ def _file_points(grid: GridSource, notes: list[str]):
         if difference:
             raise ValueError(f"{path} and {first_path} are not one grid: {difference}")
     defaults = {"name": Path(grid.task_config or grid.raw[0]).stem, "env": {}, "params": {},
-                "tasks": {}}
+                "tasks": {}, "sweeps": FILE_SWEEPS}
     dyr = read_dyr(grid.dyr)
     if grid.task_config:
         buses = bus_table(points[0][2], dyr)

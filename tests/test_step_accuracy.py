@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import pytest
 
-from experiments.step_accuracy import ACCURACY_P99, accuracy
+from experiments.step_accuracy import ACCURACY_AT_CHECK, ACCURACY_P99, accuracy
 from jaxgrid.study import builtin
 
 
 @pytest.fixture(scope="module")
 def report():
-    return accuracy(builtin("ieee39_fidvr"), dts=(0.002, 0.005), sweeps=(2,),
+    return accuracy(builtin("ieee39_fidvr"), dts=(0.002, 0.005), sweeps=(1,),
                     reference_dt=0.001, reference_sweeps=4, episode=6.0)
 
 
@@ -21,7 +21,7 @@ def test_error_grows_with_the_step_and_the_study_step_is_accurate(report):
                  by_dt.items()})
     # Heun is second order: 2.5x the step should cost well over 2.5x the error
     assert by_dt[0.005]["p99_dv_pu"] > 2.5 * by_dt[0.002]["p99_dv_pu"]
-    # the study's 2 ms step (measured p99 1.8e-4 p.u. on 10 s episodes) meets the rule
+    # the study's 2 ms, 1-sweep step (measured p99 2.2e-4 p.u. on 10 s episodes) meets the rule
     assert by_dt[0.002]["p99_dv_pu"] <= ACCURACY_P99
     assert by_dt[0.002]["changed_verdicts"] == 0
     assert by_dt[0.002]["time_ratio_to_study_step"] == 1.0
@@ -30,6 +30,7 @@ def test_error_grows_with_the_step_and_the_study_step_is_accurate(report):
 
 def test_the_recommendation_follows_the_stated_rule(report):
     good = [r for r in report["candidates"]
-            if r["p99_dv_pu"] <= ACCURACY_P99 and r["changed_verdicts"] == 0]
+            if r["p99_dv_pu"] <= ACCURACY_P99 and r["changed_verdicts"] == 0
+            and r["max_dv_at_check_pu"] <= ACCURACY_AT_CHECK]
     fastest = min(good, key=lambda r: r["wall_s"])
     assert report["recommended"] == {"dt_s": fastest["dt_s"], "sweeps": fastest["sweeps"]}

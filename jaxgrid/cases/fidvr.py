@@ -8,7 +8,7 @@ module from public data (MATPOWER networks as shipped by PYPOWER, textbook machi
 ACMTBLU1 specification); the PNNL PARS study files were read for facts (bus numbers, which load
 carries a motor, typical parameter values), nothing is read from them.
 
-ieee39_fidvr (dt = 2 ms, as the PNNL 39-bus configuration)
+ieee39_fidvr (dt = 2 ms, as the PNNL 39-bus configuration; 1 network sweep, measured)
   Network: the `ieee39` builder (MATPOWER case39; the loads of buses 4, 7, 8, 18 behind
   X = 0.003 p.u. transformers on buses 504, 507, 508, 518, split 40/40/20 % into load IDs 1-3).
   Motors: one ACMTBLU1 record on load ID 2 (40 % of the bus load) at 504, 507 and 518, as in the
@@ -24,7 +24,7 @@ ieee39_fidvr (dt = 2 ms, as the PNNL 39-bus configuration)
   winding (Pai: T'qo = 0, X'q < X'd); GENROU needs X''q < X'q, so it gets X'q = Xq (the q-axis
   transient circuit then carries no flux) and T'qo = 1 s.
 
-ieee300_fidvr (dt = 5 ms)
+ieee300_fidvr (dt = 5 ms, 1 network sweep, measured)
   Network: MATPOWER case300 (the `ieee300` builder). MATPOWER's case300 has no HVDC link (no DC
   line table, and no converter pair of equal and opposite injections among its generators and
   loads), so there is nothing to remove; the PNNL "noHVDC" files rebalance buses 119, 120 and 138
@@ -189,6 +189,9 @@ class StudyCase:
       action_buses: bus numbers whose load the task can shed.
       motor_buses: bus numbers with an ACMTBLU1 motor load.
       dt: integration step of the study, s.
+      sweeps: network fixed-point sweeps per solution. dt and sweeps are the fastest pair
+        accurate to p99 |ΔV| <= 1e-3 p.u. against a float64 1-ms 4-sweep reference
+        (`experiments.step_accuracy`, README "Step size and accuracy").
       load_level: factor on every load and generator dispatch (1 = the base case).
       description: one paragraph on how the case was built.
       reward: the study's `jaxgrid.env.EnvParams` values by field name.
@@ -202,6 +205,7 @@ class StudyCase:
     action_buses: tuple[int, ...]
     motor_buses: tuple[int, ...]
     dt: float
+    sweeps: int
     load_level: float
     description: str
     reward: dict
@@ -228,7 +232,7 @@ def ieee39_fidvr(load_level: float = 1.0) -> StudyCase:
     return StudyCase(
         name=case.name, case=case, dyr=_dyr("ieee39_fidvr", records),
         observed_buses=OBSERVED_BUSES_39, action_buses=ACTION_BUSES_39,
-        motor_buses=MOTOR_BUSES_39, dt=0.002, load_level=level, reward=REWARD_39,
+        motor_buses=MOTOR_BUSES_39, dt=0.002, sweeps=1, load_level=level, reward=REWARD_39,
         task_sets=TASK_SETS_39,
         description=("IEEE 39-bus (MATPOWER case39) with the PNNL study's load buses 504/507/508/"
                      "518 behind transformers, ACMTBLU1 A/C motors on 40 % of the load at 504, "
@@ -257,7 +261,7 @@ def ieee300_fidvr(load_level: float = 1.0) -> StudyCase:
     return StudyCase(
         name=case.name, case=case, dyr=_dyr("ieee300_fidvr", records),
         observed_buses=observed, action_buses=motor_buses, motor_buses=motor_buses, dt=0.005,
-        load_level=level, reward=REWARD_300, task_sets=TASK_SETS_300,
+        sweeps=1, load_level=level, reward=REWARD_300, task_sets=TASK_SETS_300,
         description=("IEEE 300-bus (MATPOWER case300) with the loads of the 34 zone-1 motor buses "
                      "behind transformers on buses 200xx, ACMTBLU1 A/C motors on 40 % of each, "
                      "Kundur's typical machine as GENROU on every unit, IEEET1 exciters, TGOV1 "

@@ -1,0 +1,132 @@
+"""Where one integration step's time goes: XLA kernel count and time per component.
+
+    python -m experiments.profile_step [--studies ieee39_fidvr ieee300_fidvr] [--batch 64]
+        [--calls 20] [--out bench_results/profile_step.json]
+
+For a batch of the study's training tasks at its first operating point, during the fault,
+on one CPU device:
+- kernels: the top-level instructions of the compiled, batched Heun step (what the CPU
+  runs one after another), by kind, and how many of its fusions hold complex numbers,
+  transposes, gathers or scatters;
+- time (µs per rollout-step, best of `--calls` calls of 50 steps each) of the whole step,
+  of the network solution alone (one `solve_network`; a step makes two), of one Euler
+  stage (network + device models + state update) and of the divergence check
+  (`within_bounds`), so the device models' share is stage − network.
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import time
+from collections import Counter
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from experiments.bench_sim import write_report
+from jaxgrid import network
+from jaxgrid.dynamics import axpy, derivatives, solve_network
+from jaxgrid.simulate import Bounds, heun_step, within_bounds
+from jaxgrid.study import load_study
+
+NOT_KERNELS = {"parameter", "constant", "tuple", "get-tuple-element", "bitcast"}
+STEPS_PER_CALL = 50
+
+
+def kernels(compiled_text: str) -> dict:
+    """Counts of the ENTRY computation's instructions by opcode, and of fusions by content."""
+    computations = dict(re.findall(r"\n((?:ENTRY )?%?[\w.\-]+) [^\n]*\{\n(.*?)\n\}",
+                                   "\n" + compiled_text, re.S))
+    entry = next(body for name, body in computations.items() if name.startswith("ENTRY"))
+    ops = Counter()
+    content = Counter()
+    for line in entry.splitlines():
+        match = re.search(r"= \S+ (\w[\w\-]*)\(", line)
+        if not match or match.group(1) in NOT_KERNELS:
+            continue
+        ops[match.group(1)] += 1
+        called = re.search(r"calls=%?([\w.\-]+)", line)
+        if match.group(1) == "fusion" and called:
+            body = next((b for n, b in computations.items()
+                         if n.lstrip("%") == called.group(1)), "")
+            for kind, pattern in (("complex", r"\bc(64|128)\["), ("transpose", r" transpose\("),
+                                  ("gather", r" gather\("), ("scatter", r" scatter\(")):
+                content[kind] += bool(re.search(pattern, line + body))
+    return {"total": sum(ops.values()), "by_opcode": dict(ops.most_common()),
+            "fusions_with": dict(content)}
+
+
+def _best_us(fn, args, calls: int, rollouts: int, repeat: int = 1) -> float:
+    jax.block_until_ready(fn(*args))
+    best = np.inf
+    for _ in range(calls):
+        start = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        best = min(best, time.perf_counter() - start)
+    return 1e6 * best / (rollouts * repeat)
+
+
+def profile(name: str, batch: int, calls: int) -> dict:
+    study = load_study(name)
+    model, dt = study.point(0), study.config.dt
+    specs = [s for s in study.tasks("train") if s.operating_point == 0]
+    tasks = study.batch([specs[k % len(specs)] for k in range(batch)]).task
+    states = jax.tree.map(lambda a: np.broadcast_to(a, (batch,) + a.shape), model.initial)
+    t_fault = np.float32(np.max(tasks.fault_start) + 0.5 * dt)
+
+    def fault_of(model, task):
+        return network.fault_view(model.network, task.fault_bus, task.fault_z)
+
+    def euler(model, x, fault):
+        dx, v, _ = derivatives(model, x, fault, 1.0)
+        return x.with_integrated(axpy(dt, dx, x.integrated()), v)
+
+    def one_step(model, x, task):
+        return heun_step(model, x, t_fault, dt, task, fault_of(model, task))[0]
+
+    # each component fed back into the state, so a loop of them is not hoisted
+    components = {
+        "step": one_step,
+        "solve": lambda model, x, task: x.replace(
+            v=solve_network(model, x, fault_of(model, task), 1.0)[0]),
+        "rhs": lambda model, x, task: euler(model, x, fault_of(model, task)),
+        "check": lambda model, x, task: x.replace(
+            v=jnp.where(within_bounds(x, Bounds()), x.v, 0.0 * x.v))}
+
+    def looped(component):
+        def run(model, x, task):
+            return jax.lax.fori_loop(0, STEPS_PER_CALL,
+                                     lambda k, x: component(model, x, task), x)
+        return jax.jit(jax.vmap(run, in_axes=(None, 0, 0)))
+
+    args = (model, states, tasks)
+    step_text = jax.jit(jax.vmap(one_step, in_axes=(None, 0, 0))).lower(*args).compile().as_text()
+    times = {f"{key}_us": _best_us(looped(f), args, calls, batch, STEPS_PER_CALL)
+             for key, f in components.items()}
+    times["devices_us"] = times["rhs_us"] - times["solve_us"]
+    share = {"network (2 solutions)": 2 * times["solve_us"] / times["step_us"],
+             "device models (2 evaluations)": 2 * times["devices_us"] / times["step_us"],
+             "divergence check": times["check_us"] / times["step_us"]}
+    share["rest (loads' discrete update, clips, events)"] = 1 - sum(share.values())
+    result = {"study": name, "batch": batch, "dt_s": dt, "n_slot": len(model.slot_bus),
+              "sweeps": model.sweeps, "kernels_per_step": kernels(step_text),
+              "us_per_rollout_step": {k: round(v, 3) for k, v in times.items()},
+              "share_of_step": {k: round(v, 3) for k, v in share.items()}}
+    print(name, result, flush=True)
+    return result
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--studies", nargs="*", default=["ieee39_fidvr", "ieee300_fidvr"])
+    parser.add_argument("--batch", type=int, default=64)
+    parser.add_argument("--calls", type=int, default=10)
+    parser.add_argument("--out", default="bench_results/profile_step.json")
+    args = parser.parse_args(argv)
+    jnp.zeros(())  # backend up before timing
+    write_report(args.out, profiles=[profile(s, args.batch, args.calls) for s in args.studies])
+
+
+if __name__ == "__main__":
+    main()
