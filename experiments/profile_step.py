@@ -68,10 +68,19 @@ def _best_us(fn, args, calls: int, rollouts: int, repeat: int = 1) -> float:
 
 
 def profile(name: str, batch: int, calls: int) -> dict:
+    """`profile_model` of a study's first operating point on its training tasks."""
     study = load_study(name)
-    model, dt = study.point(0), study.config.dt
     specs = [s for s in study.tasks("train") if s.operating_point == 0]
     tasks = study.batch([specs[k % len(specs)] for k in range(batch)]).task
+    result = {"study": name, **profile_model(study.point(0), study.config.dt, tasks, calls)}
+    print(name, result, flush=True)
+    return result
+
+
+def profile_model(model, dt: float, tasks, calls: int) -> dict:
+    """Kernels and µs per rollout-step of `model` at step dt (s) on a batch of `tasks`
+    (leading axis), during the fault (module docstring)."""
+    batch = int(tasks.fault_bus.shape[0])
     states = jax.tree.map(lambda a: np.broadcast_to(a, (batch,) + a.shape), model.initial)
     t_fault = np.float32(np.max(tasks.fault_start) + 0.5 * dt)
 
@@ -109,12 +118,10 @@ def profile(name: str, batch: int, calls: int) -> dict:
              "device models (2 evaluations)": 2 * times["devices_us"] / times["step_us"],
              "divergence check": times["check_us"] / times["step_us"]}
     share["rest (loads' discrete update, clips, events)"] = 1 - sum(share.values())
-    result = {"study": name, "batch": batch, "dt_s": dt, "n_slot": len(model.slot_bus),
-              "sweeps": model.sweeps, "kernels_per_step": kernels(step_text),
-              "us_per_rollout_step": {k: round(v, 3) for k, v in times.items()},
-              "share_of_step": {k: round(v, 3) for k, v in share.items()}}
-    print(name, result, flush=True)
-    return result
+    return {"batch": batch, "dt_s": dt, "n_slot": len(model.slot_bus),
+            "sweeps": model.sweeps, "kernels_per_step": kernels(step_text),
+            "us_per_rollout_step": {k: round(v, 3) for k, v in times.items()},
+            "share_of_step": {k: round(v, 3) for k, v in share.items()}}
 
 
 def main(argv=None) -> None:

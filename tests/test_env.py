@@ -155,3 +155,17 @@ def test_study_params_per_built_in_case(study):
     assert study.params == EnvParams()
     assert builtin("ieee300_fidvr").params == EnvParams(c_voltage=30.0,
                                                         unstable_penalty=10000.0)
+
+
+def test_a_diverging_episode_is_flagged_within_one_agent_step(episodes, grid, tasks):
+    """A NaN fault impedance poisons the network from the fault's first step (1.0 s). The
+    divergence check runs once per agent step: that episode ends on the agent step that
+    holds the fault start with −M, flagged; the other episode of the batch is unchanged."""
+    batched, run = episodes
+    poisoned = make_task(grid, FaultEvent(4, 1.0, 0.08, x=float("nan")))
+    out = run(zero_policy, None, stack_tasks([tasks[1], poisoned]), EnvParams(), grid,
+              jnp.zeros((2,), jnp.int32))
+    assert np.asarray(out["diverged"]).tolist() == [False, True]
+    assert int(out["steps"][1]) == 11, "the step [1.0, 1.1) s ends it"
+    assert not bool(out["recovered"][1]) and float(out["reward"][1]) <= -1000.0
+    assert float(out["reward"][0]) == float(batched["none"]["reward"][1])

@@ -1,0 +1,134 @@
+"""Scale figure: the 2000-bus synthetic Texas grid (ACTIVSg2000) with A/C motor loads.
+
+    python -m experiments.bench_scale [--batch-sizes 1 4 16 64] [--t-end 1.5]
+        [--out bench_results/scale.json]
+
+`ACTIVSg2000.RAW` + `ACTIVSg2000_dyn_acmotor_zone3_v1.dyr` from ../shared/cases, compiled
+leniently: the unsupported models are dropped with the fallbacks `jaxgrid.compile` names,
+and machine records their model rejects (GENSAL with Xl = X''d) are dropped too
+(`bench_cmld.without_bad_machines`); both lists go into the JSON. The DYR's 1125 ACMTBLU1
+records name buses 10000 + N (the zone-3 loads behind transformers, as the PNNL 300-bus
+edit puts them on 20000 + N), which ACTIVSg2000.RAW does not have: each goes onto bus N's
+load with the same ID, without the transformer (`motors_on_raw_buses`; a speed figure,
+not a study), and records with no such load are dropped and counted. At dt = 5 ms (the case's
+Texas2000_dyn_config.json, 2 network sweeps as every study from files), batches of faults
+(0.08 s at 1.0 s, cycling over the buses without a machine) run `--t-end` seconds; the
+figure is wall seconds per simulated second for the whole batch and per rollout (best of 2
+warm calls, compile timed apart), and `profile_step`'s split of one step into network,
+device models and the rest, at the largest batch.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+import warnings
+
+import jax
+import numpy as np
+
+from experiments.bench_cmld import SHARED, without_bad_machines
+from experiments.bench_sim import write_report
+from experiments.profile_step import profile_model
+from jaxgrid.compile import CompileOptions, compile_model
+from jaxgrid.io.dyr import DyrData
+from jaxgrid.io.raw import read_raw
+from jaxgrid.simulate import FaultEvent, make_task, simulate_batch, stack_tasks
+
+RAW = SHARED / "activsg2000/ACTIVSg2000.RAW"
+DYR = SHARED / "activsg2000/ACTIVSg2000_dyn_acmotor_zone3_v1.dyr"
+DT = 0.005  # s: Texas2000_dyn_config.json simuTimeStepSec
+FAULT_START, FAULT_DURATION, SAMPLE = 1.0, 0.08, 0.1  # s
+
+
+MOTOR_BUS_OFFSET = 10000  # the DYR's motor bus = this + the RAW load bus
+
+
+def motors_on_raw_buses(data: DyrData, case) -> tuple[DyrData, dict]:
+    """`data` with each load-model record on bus 10000 + N moved to bus N where N has a load
+    of that ID; records with neither bus are dropped. Returns (data, counts)."""
+    loads = {(int(case.buses.number[b]), str(i).strip()) for b, i in
+             zip(case.loads.bus, case.loads.load_id)}
+    kept, counts = [], {"moved": 0, "dropped": 0}
+    for r in data.records:
+        key = (r.bus - MOTOR_BUS_OFFSET, r.device_id.strip())
+        if r.record_type != "USRLOD" or (r.bus, r.device_id.strip()) in loads:
+            kept.append(r)
+        elif key in loads:
+            kept.append(dataclasses.replace(r, bus=key[0]))
+            counts["moved"] += 1
+        else:
+            counts["dropped"] += 1
+    return dataclasses.replace(data, records=tuple(kept)), counts
+
+
+def texas_model():
+    """(model, compile s, details: rejected machine records, unsupported-model notes, motor
+    records moved / dropped)."""
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        case = read_raw(RAW)
+        data, rejected = without_bad_machines(DYR)
+        data, motors = motors_on_raw_buses(data, case)
+        model = compile_model(case, data, CompileOptions(strict=False))
+    unsupported = [n for n in model.notes if "unsupported dynamic models" in n]
+    return model, time.perf_counter() - start, {
+        "unsupported": unsupported, "rejected_machine_records": rejected,
+        "motor_records": motors}
+
+
+def fault_tasks(model, batch: int):
+    buses = [b for b in model.bus_numbers if b > 0 and b not in set(model.gen_bus)]
+    return stack_tasks([make_task(model, FaultEvent(buses[k * 7 % len(buses)], FAULT_START,
+                                                    FAULT_DURATION)) for k in range(batch)])
+
+
+def bench(batch_sizes, t_end: float) -> dict:
+    model, compile_s, details = texas_model()
+    result = {"case": "ACTIVSg2000 + ACTIVSg2000_dyn_acmotor_zone3_v1.dyr",
+              "n_bus": model.n_bus, "n_gen": model.n_gen, "n_slot": len(model.slot_bus),
+              "n_motor": sum(len(g.index) for g in model.loads), "dt_s": DT,
+              "sweeps": model.sweeps, "compile_s": round(compile_s, 2), **details,
+              "runs": []}
+    print({k: v for k, v in result.items() if k != "runs"}, flush=True)
+    decimation = int(round(SAMPLE / DT))
+    for batch in batch_sizes:
+        tasks = fault_tasks(model, batch)
+
+        def run():
+            return jax.block_until_ready(
+                simulate_batch(model, tasks, t_end, DT, decimation=decimation).vm)
+
+        start = time.perf_counter()
+        vm = run()
+        first = time.perf_counter() - start
+        warm = []
+        for _ in range(2):
+            start = time.perf_counter()
+            run()
+            warm.append(time.perf_counter() - start)
+        row = {"batch": batch, "first_call_s": round(first, 2),
+               "s_per_simulated_s": round(min(warm) / t_end, 3),
+               "s_per_simulated_s_per_rollout": round(min(warm) / t_end / batch, 4),
+               "finite": bool(np.all(np.isfinite(np.asarray(vm))))}
+        print(row, flush=True)
+        result["runs"].append(row)
+    best = min(result["runs"], key=lambda r: r["s_per_simulated_s_per_rollout"])
+    result["best_batch"] = best["batch"]
+    result["profile"] = profile_model(model, DT, fault_tasks(model, max(batch_sizes)), calls=2)
+    print(result["profile"], flush=True)
+    return result
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--batch-sizes", nargs="*", type=int, default=[1, 4, 16, 64])
+    parser.add_argument("--t-end", type=float, default=1.5, help="s simulated per call")
+    parser.add_argument("--out", default="bench_results/scale.json")
+    args = parser.parse_args(argv)
+    write_report(args.out, **bench(args.batch_sizes, args.t_end))
+
+
+if __name__ == "__main__":
+    main()
