@@ -25,6 +25,9 @@ bench:  ## benchmarks; figures go to bench_results/*.json
 	$(PY) -m experiments.bench_train --out bench_results/train.json
 	$(PY) -m experiments.bench_cmld --out bench_results/cmld.json
 	$(PY) -m experiments.bench_latency --out bench_results/latency.json
+	$(PY) -m experiments.profile_step --out bench_results/profile_step.json
+	$(PY) -m experiments.bench_speedup --rounds 1 --out bench_results/speedup.json
+	$(PY) -m experiments.bench_scale --out bench_results/scale.json
 
 reproduce:  ## the paper's 39-bus figures and tables, REPORT.md in results/reproduce39
 	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.reproduce \

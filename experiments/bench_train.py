@@ -37,16 +37,18 @@ TASKS_PER_ITERATION = 9
 EPISODE = 10.0  # s
 
 
-def bench_case(case: str, device_counts, repeats: int) -> dict:
+def bench_case(case: str, device_counts, repeats: int, task_batch: int | None = None) -> dict:
     defaults = DEFAULTS.get(case, PLAIN)
     study = load_study(case)
     config = ParsConfig(directions=defaults["directions"], top=defaults["top"],
-                        decay=defaults["decay"], tasks_per_iteration=TASKS_PER_ITERATION)
+                        decay=defaults["decay"], tasks_per_iteration=TASKS_PER_ITERATION,
+                        task_batch=task_batch or defaults["task_batch"])
     hidden = tuple(int(h) for h in defaults["hidden"].split(","))
     rollouts = 2 * config.directions * config.tasks_per_iteration
     result = {"case": case, "policy": defaults["policy"], "hidden": list(hidden),
               "directions": config.directions, "top": config.top,
               "tasks_per_iteration": config.tasks_per_iteration,
+              "task_batch": config.task_batch,
               "rollouts_per_iteration": rollouts, "runs": []}
     for n_dev in device_counts:
         mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
@@ -80,12 +82,15 @@ def main(argv=None) -> None:
                         help="built-in study names or study files")
     parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--task-batch", type=int,
+                        help="tasks per rollout batch (default: the training command's)")
     parser.add_argument("--out", default="bench_results/train.json")
     args = parser.parse_args(argv)
     if max(args.devices) > len(jax.devices()):
         parser.error(f"--devices {max(args.devices)}: only {len(jax.devices())} available")
     write_report(args.out, episode_s=EPISODE,
-                 cases=[bench_case(c, args.devices, args.repeats) for c in args.studies])
+                 cases=[bench_case(c, args.devices, args.repeats, args.task_batch)
+                        for c in args.studies])
 
 
 if __name__ == "__main__":

@@ -40,7 +40,7 @@ from experiments.studyargs import add_study_arguments, study_from_args
 
 # Hyper-parameter defaults of the plain command (the presets give the paper's per case).
 DEFAULTS = {"study": None, "policy": "lstm", "hidden": "32,32", "directions": 16, "top": 8,
-            "decay": 0.99, "iterations": 200}
+            "decay": 0.99, "iterations": 200, "task_batch": None}
 
 
 def parser(defaults: dict) -> argparse.ArgumentParser:
@@ -59,6 +59,9 @@ def parser(defaults: dict) -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=2.0, help="ν")
     p.add_argument("--decay", type=float, default=defaults["decay"], help="ε")
     p.add_argument("--tasks-per-iteration", type=int, default=9, help="m")
+    p.add_argument("--task-batch", type=int, default=defaults["task_batch"],
+                   help="tasks whose rollouts run as one batch (default all m); batches run "
+                        "one after another and stop once all their episodes are done")
     p.add_argument("--task-set", default="train", help="the study's task set to train on")
     p.add_argument("--task-sampling", default="uniform", choices=["uniform", "stratified"],
                    help="m distinct tasks uniformly, or k buses × k' durations as the paper")
@@ -146,7 +149,8 @@ def _train(args) -> int:
     hidden = tuple(int(h) for h in str(args.hidden).split(",") if h.strip())
     config = ParsConfig(directions=args.directions, top=args.top, step_size=args.step_size,
                         noise=args.noise, decay=args.decay,
-                        tasks_per_iteration=args.tasks_per_iteration, seed=args.seed)
+                        tasks_per_iteration=args.tasks_per_iteration,
+                        task_batch=args.task_batch, seed=args.seed)
     if args.iterations < 1 or args.checkpoint_every < 1 or (args.seeds or 1) < 1:
         raise ValueError("--iterations, --checkpoint-every and --seeds must be >= 1")
     out = Path(args.out)

@@ -304,7 +304,9 @@ class LoadSheddingEnv:
         policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
         initial policy state (None for feed-forward policies). A `Planner` (e.g. the MPC)
         is called with a fourth argument, `PlanInputs`. After `done` the reward stops and
-        the policy state is held. Returns {"reward", "shed_pu", "recovered",
+        the policy state is held; without `trace` (and for policies, not planners) the
+        episode loop stops there, so a batch of episodes (vmapped) costs nothing more once
+        all of them are done. Returns {"reward", "shed_pu", "recovered",
         "steps" (agent steps taken), "diverged", "policy_carry" (final)}; with `trace`
         (static) also per agent step "vm" (n_steps, n_observed) p.u. and "shed_step_pu"
         (n_steps,), frozen after the episode ends.
@@ -330,8 +332,17 @@ class LoadSheddingEnv:
 
         zero = jnp.zeros((), obs.dtype)
         init = (obs, state, policy_carry, zero, zero, jnp.zeros((), bool))
-        (_, state, carry, total, shed, failed), per_step = jax.lax.scan(
-            step, init, jnp.arange(self.config.n_steps))
+        n_steps = self.config.n_steps
+        if trace or isinstance(policy_apply, Planner):
+            # a scan: per-step outputs, and an unbatched step index for the planner
+            final, per_step = jax.lax.scan(step, init, jnp.arange(n_steps))
+        else:
+            # stops once done; vmapped, once every episode of the batch is done
+            _, final = jax.lax.while_loop(
+                lambda loop: (loop[0] < n_steps) & ~loop[1][1].done,
+                lambda loop: (loop[0] + 1, step(loop[1], loop[0])[0]),
+                (jnp.zeros((), jnp.int32), init))
+        _, state, carry, total, shed, failed = final
         out = {"reward": total, "shed_pu": shed, "recovered": ~failed, "steps": state.step,
                "diverged": state.health.diverged, "policy_carry": carry}
         if trace:

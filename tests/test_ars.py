@@ -141,6 +141,16 @@ def test_seeds_in_one_program_equal_the_runs_one_by_one(quadratic):
     assert not np.allclose(np.asarray(state.theta[0]), np.asarray(state.theta[1]))
 
 
+def test_tasks_in_batches_equal_all_tasks_at_once(quadratic):
+    """task_batch runs the m tasks in batches one after another (lax.map): the same θ."""
+    import dataclasses
+
+    policy, config = quadratic
+    together, _, _ = _train(policy, config, 5)
+    batched, _, _ = _train(policy, dataclasses.replace(config, task_batch=1), 5)
+    np.testing.assert_array_equal(np.asarray(batched.theta), np.asarray(together.theta))
+
+
 def test_bad_hyper_parameters_are_named(quadratic):
     policy, config = quadratic
     with pytest.raises(ValueError, match=r"top = 9: allowed in \[1, directions = 8\]"):

@@ -158,14 +158,26 @@ def test_study_params_per_built_in_case(study):
 
 
 def test_a_diverging_episode_is_flagged_within_one_agent_step(episodes, grid, tasks):
-    """A NaN fault impedance poisons the network from the fault's first step (1.0 s). The
-    divergence check runs once per agent step: that episode ends on the agent step that
-    holds the fault start with −M, flagged; the other episode of the batch is unchanged."""
+    """A NaN fault impedance poisons the network term (0·NaN) from the first integration
+    step on. The divergence check runs once per agent step: that episode ends on its first
+    agent step with −M, flagged; the other episode of the batch is unchanged."""
     batched, run = episodes
     poisoned = make_task(grid, FaultEvent(4, 1.0, 0.08, x=float("nan")))
     out = run(zero_policy, None, stack_tasks([tasks[1], poisoned]), EnvParams(), grid,
               jnp.zeros((2,), jnp.int32))
     assert np.asarray(out["diverged"]).tolist() == [False, True]
-    assert int(out["steps"][1]) == 11, "the step [1.0, 1.1) s ends it"
+    assert int(out["steps"][1]) == 1, "the agent step [0, 0.1) s ends it"
     assert not bool(out["recovered"][1]) and float(out["reward"][1]) <= -1000.0
     assert float(out["reward"][0]) == float(batched["none"]["reward"][1])
+
+
+def test_the_stopping_loop_equals_the_full_scan(episodes, env, grid, tasks):
+    """Without `trace` the episode loop stops once every episode of the batch is done; with
+    it, the scan runs all steps. The results are bitwise the same."""
+    batched, _ = episodes
+    traced = jax.jit(env.rollout, static_argnums=(0, 6))(
+        shed_after_fault, None, stack_tasks(tasks), EnvParams(), grid,
+        jnp.zeros((3,), jnp.int32), True)
+    for key in ("reward", "shed_pu", "steps", "recovered", "policy_carry"):
+        np.testing.assert_array_equal(np.asarray(traced[key]),
+                                      np.asarray(batched["shed"][key]), err_msg=key)
