@@ -67,7 +67,10 @@ def test_cli_writes_the_documented_json_figures_and_study(tmp_path):
     again = tmp_path / "again.json"
     assert main(["--study", str(out.with_suffix(".study.toml")), "--tasks", "train",
                  "--out", str(again)]) == 0, "the saved study reproduces the run"
-    assert json.loads(again.read_text())["tasks"] == data["tasks"]
+    # the plotting run traces its episodes (a full scan), this one stops them when done
+    # (a while loop): the same episodes, compiled apart, to float32 rounding
+    for a, b in zip(json.loads(again.read_text())["tasks"], data["tasks"]):
+        assert a.pop("reward") == pytest.approx(b.pop("reward"), rel=1e-5) and a == b
     assert main(["--controller", "ppo", "--out", str(out)]) == 2
     assert main(["--tasks", "holdout", "--out", str(out)]) == 2
 
