@@ -43,7 +43,8 @@ class ParsConfig:
       tasks_per_iteration: m, tasks drawn (without replacement) per iteration.
       task_batch: tasks whose 2N rollouts run as one batch (None: all m). Batches run one
         after another, and a batch stops once all its episodes are done (episodes that fail
-        early stop costing), at the price of smaller batches. Results are equal.
+        early stop costing), at the price of smaller batches. Results are equal to float
+        rounding (batches of other sizes compile apart; a borderline episode can flip).
       seed: PRNG seed.
     """
 
