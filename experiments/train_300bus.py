@@ -1,7 +1,7 @@
 """PARS on the IEEE 300-bus FIDVR case with the study's defaults (LSTM [64, 64], N = 128,
 b = 64, α = 1, ν = 2, ε = 0.996). The m tasks run one after another (task_batch 1: 256
 rollouts per batch, and a task's batch stops once all its episodes have failed; measured
-1.17× faster per iteration at θ = 0 on 2 CPU devices). See experiments/train.py for the
+on 2 CPU devices 1.17× faster per iteration at θ = 0, 2.4× after the first update). See experiments/train.py for the
 flags and outputs."""
 import sys
 
