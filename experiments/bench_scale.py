@@ -24,11 +24,10 @@ import dataclasses
 import time
 import warnings
 
-import jax
 import numpy as np
 
 from experiments.bench_cmld import SHARED, without_bad_machines
-from experiments.bench_sim import write_report
+from experiments.bench_sim import _timed, write_report
 from experiments.profile_step import profile_model
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import DyrData
@@ -79,7 +78,8 @@ def texas_model():
 
 
 def fault_tasks(model, batch: int):
-    buses = [b for b in model.bus_numbers if b > 0 and b not in set(model.gen_bus)]
+    machines = set(model.gen_bus)
+    buses = [b for b in model.bus_numbers if b > 0 and b not in machines]
     return stack_tasks([make_task(model, FaultEvent(buses[k * 7 % len(buses)], FAULT_START,
                                                     FAULT_DURATION)) for k in range(batch)])
 
@@ -97,20 +97,13 @@ def bench(batch_sizes, t_end: float) -> dict:
         tasks = fault_tasks(model, batch)
 
         def run():
-            return jax.block_until_ready(
-                simulate_batch(model, tasks, t_end, DT, decimation=decimation).vm)
+            return simulate_batch(model, tasks, t_end, DT, decimation=decimation).vm
 
-        start = time.perf_counter()
-        vm = run()
-        first = time.perf_counter() - start
-        warm = []
-        for _ in range(2):
-            start = time.perf_counter()
-            run()
-            warm.append(time.perf_counter() - start)
+        vm, first = _timed(run)
+        warm = min(_timed(run)[1] for _ in range(2))
         row = {"batch": batch, "first_call_s": round(first, 2),
-               "s_per_simulated_s": round(min(warm) / t_end, 3),
-               "s_per_simulated_s_per_rollout": round(min(warm) / t_end / batch, 4),
+               "s_per_simulated_s": round(warm / t_end, 3),
+               "s_per_simulated_s_per_rollout": round(warm / t_end / batch, 4),
                "finite": bool(np.all(np.isfinite(np.asarray(vm))))}
         print(row, flush=True)
         result["runs"].append(row)

@@ -27,7 +27,8 @@ BASELINE = "cae8d39"  # the code before the performance issue (15)
 
 
 def bench_train_row(tree: Path, study: str, devices: int, repeats: int, out: Path) -> dict:
-    """One `experiments.bench_train` run of the tree at `tree` in a fresh process: its row.
+    """One `experiments.bench_train` run of the tree at `tree` in a fresh process: its case
+    (rollouts_per_iteration, runs).
 
     Commits before the studies-as-data change name a built-in study `--cases`."""
     flag = "--studies" if "--studies" in (tree / "experiments/bench_train.py").read_text() \
@@ -35,7 +36,7 @@ def bench_train_row(tree: Path, study: str, devices: int, repeats: int, out: Pat
     subprocess.run([sys.executable, "-m", "experiments.bench_train", flag, study,
                     "--devices", str(devices), "--repeats", str(repeats), "--out", str(out)],
                    cwd=tree, check=True, env={**os.environ, "PYTHONPATH": str(tree)})
-    return json.loads(out.read_text())["cases"][0]["runs"][0]
+    return json.loads(out.read_text())["cases"][0]
 
 
 def speedup(baseline: str, studies, device_counts, rounds: int, repeats: int) -> list[dict]:
@@ -50,10 +51,10 @@ def speedup(baseline: str, studies, device_counts, rounds: int, repeats: int) ->
                     times = {"baseline": [], "this": []}
                     for _ in range(rounds):
                         for side, tree in (("baseline", old), ("this", ROOT)):
-                            row = bench_train_row(tree, study, devices, repeats,
-                                                  Path(tmp) / "run.json")
-                            times[side].append(row["s_per_iteration"])
-                    rollouts = row["rollouts_per_s"] * row["s_per_iteration"]
+                            case = bench_train_row(tree, study, devices, repeats,
+                                                   Path(tmp) / "run.json")
+                            times[side].append(case["runs"][0]["s_per_iteration"])
+                    rollouts = case["rollouts_per_iteration"]
                     best = {side: min(t) for side, t in times.items()}
                     rows.append({"study": study, "devices": devices,
                                  "s_per_iteration": best, "all_s_per_iteration": times,

@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import argparse
 import re
-import time
 from collections import Counter
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.bench_sim import write_report
+from experiments.bench_sim import _timed, write_report
 from jaxgrid import network
 from jaxgrid.dynamics import axpy, derivatives, solve_network
 from jaxgrid.simulate import Bounds, heun_step, within_bounds
@@ -57,14 +56,10 @@ def kernels(compiled_text: str) -> dict:
             "fusions_with": dict(content)}
 
 
-def _best_us(fn, args, calls: int, rollouts: int, repeat: int = 1) -> float:
-    jax.block_until_ready(fn(*args))
-    best = np.inf
-    for _ in range(calls):
-        start = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        best = min(best, time.perf_counter() - start)
-    return 1e6 * best / (rollouts * repeat)
+def _best_us(fn, args, calls: int, rollout_steps: int) -> float:
+    """µs per rollout-step: the best of `calls` warm calls of fn(*args)."""
+    _timed(lambda: fn(*args))
+    return 1e6 * min(_timed(lambda: fn(*args))[1] for _ in range(calls)) / rollout_steps
 
 
 def profile(name: str, batch: int, calls: int) -> dict:
@@ -111,7 +106,7 @@ def profile_model(model, dt: float, tasks, calls: int) -> dict:
 
     args = (model, states, tasks)
     step_text = jax.jit(jax.vmap(one_step, in_axes=(None, 0, 0))).lower(*args).compile().as_text()
-    times = {f"{key}_us": _best_us(looped(f), args, calls, batch, STEPS_PER_CALL)
+    times = {f"{key}_us": _best_us(looped(f), args, calls, batch * STEPS_PER_CALL)
              for key, f in components.items()}
     times["devices_us"] = times["rhs_us"] - times["solve_us"]
     share = {"network (2 solutions)": 2 * times["solve_us"] / times["step_us"],

@@ -31,9 +31,8 @@ class Network:
       zr_ss: (2·n_slot, 2·n_slot) real block (`real_block`) of Z[slot, slot]: slot
         voltages per unit current injected at a slot.
       zr_bs: (2·n_bus, 2·n_slot) real block of Z[bus, slot]: bus voltages from slot
-        injections.
+        injections; its blocks also give the fault rows Z[f, slot].
       z_sb: (n_slot, n_bus) complex Z[slot, bus]: the slot side of a fault column.
-      z_bs: (n_bus, n_slot) complex Z[bus, slot]: fault rows.
       z_bb: (n_bus, n_bus) complex, the whole impedance matrix (fault columns for bus
         voltages).
     """
@@ -41,7 +40,6 @@ class Network:
     zr_ss: jnp.ndarray
     zr_bs: jnp.ndarray
     z_sb: jnp.ndarray
-    z_bs: jnp.ndarray
     z_bb: jnp.ndarray
 
     @property
@@ -78,7 +76,7 @@ def build(y: np.ndarray, slot_bus: np.ndarray, dtype) -> Network:
     real = np.real(np.zeros((), dtype)).dtype
     return Network(zr_ss=real_block(z[np.ix_(slot_bus, slot_bus)]).astype(real),
                    zr_bs=real_block(z[:, slot_bus]).astype(real),
-                   z_sb=cast(z[slot_bus, :]), z_bs=cast(z[:, slot_bus]), z_bb=cast(z))
+                   z_sb=cast(z[slot_bus, :]), z_bb=cast(z))
 
 
 def real_block(z: np.ndarray) -> np.ndarray:
@@ -96,7 +94,9 @@ def times(block, current):
 
 def fault_view(net: Network, bus, z_fault) -> Fault:
     """Fault vectors for a fault at bus index `bus` (int, traced) with impedance z_fault (p.u.)."""
-    return Fault(col=net.z_sb[:, bus], row=net.z_bs[bus, :], col_bus=net.z_bb[:, bus],
+    n_bus, n_slot = net.z_bb.shape[0], net.z_sb.shape[0]
+    row = jax.lax.complex(net.zr_bs[bus, :n_slot], net.zr_bs[n_bus + bus, :n_slot])
+    return Fault(col=net.z_sb[:, bus], row=row, col_bus=net.z_bb[:, bus],
                  denom=net.z_bb[bus, bus] + z_fault)
 
 
