@@ -141,7 +141,8 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
         for model, units, params in groups:
             k = [position[u] for u in units]
             params, x, efd, pm = model.init(_jnp(params), jnp.asarray(vt0[k]), jnp.asarray(i0[k]))
-            xadifd.append(np.asarray(model.field_current(params, x, jnp.asarray(i0[k]))))
+            i_dq = model.to_rotor(x, jnp.asarray(i0[k]))
+            xadifd.append(np.asarray(model.field_current(params, x, i_dq)))
             machines.append(DeviceGroup(params=_np(params), model=model, index=tuple(k),
                                         labels=_labels(case, model.name, units)))
             m_states.append(_np(x))

@@ -78,8 +78,10 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
     v, _, residual, emf = solve_network(model, x, fault, active)
     vt = v[:model.n_gen]
     current = (emf - vt) / model.z_source
+    i_dq = jnp.concatenate([g.model.to_rotor(xs, current[_index(g)])
+                            for g, xs in zip(model.machines, x.machines)])
     dw = machine_state(x, "dw")
-    xadifd = jnp.concatenate([g.model.field_current(g.params, xs, current[_index(g)])
+    xadifd = jnp.concatenate([g.model.field_current(g.params, xs, i_dq[_index(g)])
                               for g, xs in zip(model.machines, x.machines)])
     efd = jnp.asarray(model.efd0)
     d_exciters = []
@@ -98,7 +100,7 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
         pm = pm.at[k].set(out)
         d_governors.append(dx)
     d_machines = tuple(
-        g.model.derivative(g.params, xs, current[_index(g)], efd[_index(g)], pm[_index(g)],
+        g.model.derivative(g.params, xs, i_dq[_index(g)], efd[_index(g)], pm[_index(g)],
                            model.omega_b)
         for g, xs in zip(model.machines, x.machines))
     v_load = v[model.n_gen:]

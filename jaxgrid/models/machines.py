@@ -8,7 +8,10 @@ Network interface: a machine is a Norton source behind its subtransient (GENROU,
 transient (GENCLS) impedance `ra + j·xs`. Because X''q = X''d in these models, the Norton
 equivalent is exact and no saliency correction is needed. Rotor frame:
 `E'' = (ψ''q + j·ψ''d)·exp(j(δ − π/2))`; a current `I` (injected, machine base) maps to
-`id + j·iq = I·exp(−j(δ − π/2))`.
+`id + j·iq = I·exp(−j(δ − π/2))`. A model's equations see only the rotor frame
+(`emf_rotor`, and the current `to_rotor` gives them); the two rotations happen once per
+stage in `jaxgrid.dynamics`, because XLA copies a sin/cos into every fused kernel that reads
+it (14 per step, 4 since this split, 39-bus study).
 """
 from __future__ import annotations
 
@@ -66,24 +69,35 @@ class MachineModel(DeviceModel):
         raise NotImplementedError
 
     @classmethod
+    def emf_rotor(cls, p: Params, x: States):
+        """Internal EMF behind `ra + j·xs` in the rotor frame, ψ''q + j·ψ''d, complex (n,)."""
+        raise NotImplementedError
+
+    @classmethod
     def emf(cls, p: Params, x: States):
         """Internal EMF behind `ra + j·xs`, network frame, complex (n,)."""
+        return cls.emf_rotor(p, x) * to_network_frame(x["delta"])
+
+    @staticmethod
+    def to_rotor(x: States, i):
+        """The injected current i (n,) (network frame) in the rotor frame, id + j·iq."""
+        return i * jnp.conj(to_network_frame(x["delta"]))
+
+    @classmethod
+    def derivative(cls, p: Params, x: States, i_dq, efd, pm, omega_b: float) -> States:
+        """State derivatives given the injected current i_dq (rotor frame, MBASE)."""
         raise NotImplementedError
 
     @classmethod
-    def derivative(cls, p: Params, x: States, i, efd, pm, omega_b: float) -> States:
-        """State derivatives given the injected current i (network frame, MBASE)."""
+    def field_current(cls, p: Params, x: States, i_dq):
+        """XadIfd (p.u.) at the injected current i_dq (rotor frame), for compound-source
+        exciters."""
         raise NotImplementedError
 
     @classmethod
-    def field_current(cls, p: Params, x: States, i):
-        """XadIfd (p.u.), used by compound-source exciters."""
-        raise NotImplementedError
-
-    @classmethod
-    def electrical_power(cls, p: Params, x: States, i):
-        """Air-gap power Te = Re(E''·conj(I)), p.u. MBASE."""
-        return jnp.real(cls.emf(p, x) * jnp.conj(i))
+    def electrical_power(cls, p: Params, x: States, i_dq):
+        """Air-gap power Te = Re(E''·conj(I)), p.u. MBASE (either frame: i_dq rotor)."""
+        return jnp.real(cls.emf_rotor(p, x) * jnp.conj(i_dq))
 
 
 class Gencls(MachineModel):
@@ -105,15 +119,15 @@ class Gencls(MachineModel):
         return p, x, jnp.zeros_like(p["h"]), jnp.real(e0 * jnp.conj(i0))
 
     @classmethod
-    def emf(cls, p, x):
-        return p["e_mag"] * jnp.exp(1j * x["delta"])
+    def emf_rotor(cls, p, x):
+        return 1j * p["e_mag"]  # e_mag·exp(jδ) in the network frame
 
     @classmethod
-    def derivative(cls, p, x, i, efd, pm, omega_b):
-        return swing(p, x, pm, cls.electrical_power(p, x, i), omega_b)
+    def derivative(cls, p, x, i_dq, efd, pm, omega_b):
+        return swing(p, x, pm, cls.electrical_power(p, x, i_dq), omega_b)
 
     @classmethod
-    def field_current(cls, p, x, i):
+    def field_current(cls, p, x, i_dq):
         return jnp.zeros_like(p["h"])
 
 
@@ -182,9 +196,9 @@ class Genrou(MachineModel):
         return psi_d, psi_q
 
     @classmethod
-    def emf(cls, p, x):
+    def emf_rotor(cls, p, x):
         psi_d, psi_q = cls._flux(p, x)
-        return (psi_q + 1j * psi_d) * to_network_frame(x["delta"])
+        return psi_q + 1j * psi_d
 
     @classmethod
     def init(cls, p, v0, i0):
@@ -203,11 +217,6 @@ class Genrou(MachineModel):
         return p, x, efd0, jnp.real(psi0 * jnp.conj(i0))
 
     @classmethod
-    def _currents(cls, x, i):
-        i_dq = i * jnp.conj(to_network_frame(x["delta"]))
-        return jnp.real(i_dq), jnp.imag(i_dq)
-
-    @classmethod
     def _saturation_terms(cls, p, x):
         """(Se(|ψ''|)·ψ''d, Se(|ψ''|)·ψ''q·γ): extra magnetising effort on each axis."""
         psi_d, psi_q = cls._flux(p, x)
@@ -215,23 +224,23 @@ class Genrou(MachineModel):
         return se * psi_d, se * psi_q * p["gamma"]
 
     @classmethod
-    def field_current(cls, p, x, i):
-        i_d, _ = cls._currents(x, i)
+    def field_current(cls, p, x, i_dq):
+        i_d = jnp.real(i_dq)
         sat_d, _ = cls._saturation_terms(p, x)
         return (x["eq1"] + (p["xd"] - p["xpd"]) * i_d
                 + p["k1d"] * (x["eq1"] - x["psikd"] - (p["xpd"] - p["xl"]) * i_d) + sat_d)
 
     @classmethod
-    def derivative(cls, p, x, i, efd, pm, omega_b):
-        i_d, i_q = cls._currents(x, i)
+    def derivative(cls, p, x, i_dq, efd, pm, omega_b):
+        i_d, i_q = jnp.real(i_dq), jnp.imag(i_dq)
         _, sat_q = cls._saturation_terms(p, x)
         xaqi1q = (x["ed1"] - (p["xq"] - p["xpq"]) * i_q
                   + p["k1q"] * (x["ed1"] - x["psikq"] + (p["xpq"] - p["xl"]) * i_q) + sat_q)
-        dx = {"eq1": (efd - cls.field_current(p, x, i)) / p["tpdo"],
+        dx = {"eq1": (efd - cls.field_current(p, x, i_dq)) / p["tpdo"],
               "ed1": -xaqi1q / p["tpqo"],
               "psikd": (x["eq1"] - x["psikd"] - (p["xpd"] - p["xl"]) * i_d) / p["tppdo"],
               "psikq": (x["ed1"] - x["psikq"] + (p["xpq"] - p["xl"]) * i_q) / p["tppqo"]}
-        return dx | swing(p, x, pm, cls.electrical_power(p, x, i), omega_b)
+        return dx | swing(p, x, pm, cls.electrical_power(p, x, i_dq), omega_b)
 
 
 class Gensal(Genrou):
@@ -272,19 +281,19 @@ class Gensal(Genrou):
         return p, x, efd0, jnp.real(psi0 * jnp.conj(i0))
 
     @classmethod
-    def field_current(cls, p, x, i):
-        i_d, _ = cls._currents(x, i)
+    def field_current(cls, p, x, i_dq):
+        i_d = jnp.real(i_dq)
         se = cls.saturation(x["eq1"], p["sat_a"], p["sat_b"])
         return (x["eq1"] + (p["xd"] - p["xpd"]) * i_d
                 + p["k1d"] * (x["eq1"] - x["psikd"] - (p["xpd"] - p["xl"]) * i_d) + se * x["eq1"])
 
     @classmethod
-    def derivative(cls, p, x, i, efd, pm, omega_b):
-        i_d, i_q = cls._currents(x, i)
-        dx = {"eq1": (efd - cls.field_current(p, x, i)) / p["tpdo"],
+    def derivative(cls, p, x, i_dq, efd, pm, omega_b):
+        i_d, i_q = jnp.real(i_dq), jnp.imag(i_dq)
+        dx = {"eq1": (efd - cls.field_current(p, x, i_dq)) / p["tpdo"],
               "psikd": (x["eq1"] - x["psikd"] - (p["xpd"] - p["xl"]) * i_d) / p["tppdo"],
               "psiq2": (-x["psiq2"] + (p["xq"] - p["xppd"]) * i_q) / p["tppqo"]}
-        return dx | swing(p, x, pm, cls.electrical_power(p, x, i), omega_b)
+        return dx | swing(p, x, pm, cls.electrical_power(p, x, i_dq), omega_b)
 
 
 def exponential_saturation(x, n, s1):
