@@ -13,8 +13,8 @@ install:  ## create .venv and install the project with its test extras
 run:  ## the main job on the built-in default case: PARS training on the 39-bus FIDVR study
 	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.train_39bus --out runs/ieee39
 
-test:  ## the test suite (2 simulated CPU devices, see tests/conftest.py)
-	$(PY) -m pytest -q
+test:  ## the test suite: test files shared by 2 workers, 2 simulated CPU devices each (tests/conftest.py)
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 bench:  ## benchmarks; figures go to bench_results/*.json
 	$(PY) -m experiments.bench_powerflow --out bench_results/powerflow.json
