@@ -10,8 +10,10 @@ on one CPU device:
   transposes, gathers or scatters;
 - time (µs per rollout-step, best of `--calls` calls of 50 steps each) of the whole step,
   of the network solution alone (one `solve_network`; a step makes two), of one Euler
-  stage (network + device models + state update) and of the divergence check
-  (`within_bounds`), so the device models' share is stage − network.
+  stage (network + device models + state update), of the load models' discrete update
+  (`update_loads`, once a step), of one limit clip (`clip_to_limits`, two a step) and of the
+  divergence check (`within_bounds`, once an agent step: not part of the step's share), so
+  the device models' share is stage − network.
 """
 from __future__ import annotations
 
@@ -25,7 +27,7 @@ import numpy as np
 
 from experiments.bench_sim import _timed, write_report
 from jaxgrid import network
-from jaxgrid.dynamics import axpy, derivatives, solve_network
+from jaxgrid.dynamics import axpy, clip_to_limits, derivatives, solve_network, update_loads
 from jaxgrid.simulate import Bounds, heun_step, within_bounds
 from jaxgrid.study import load_study
 
@@ -95,6 +97,9 @@ def profile_model(model, dt: float, tasks, calls: int) -> dict:
         "solve": lambda model, x, task: x.replace(
             v=solve_network(model, x, fault_of(model, task), 1.0)[0]),
         "rhs": lambda model, x, task: euler(model, x, fault_of(model, task)),
+        "loads": lambda model, x, task: update_loads(model, x, 0.999 * x.v, dt),
+        "clip": lambda model, x, task: x.with_integrated(
+            clip_to_limits(model, x.integrated()), x.v),
         "check": lambda model, x, task: x.replace(
             v=jnp.where(within_bounds(x, Bounds()), x.v, 0.0 * x.v))}
 
@@ -111,8 +116,9 @@ def profile_model(model, dt: float, tasks, calls: int) -> dict:
     times["devices_us"] = times["rhs_us"] - times["solve_us"]
     share = {"network (2 solutions)": 2 * times["solve_us"] / times["step_us"],
              "device models (2 evaluations)": 2 * times["devices_us"] / times["step_us"],
-             "divergence check": times["check_us"] / times["step_us"]}
-    share["rest (loads' discrete update, clips, events)"] = 1 - sum(share.values())
+             "load models' discrete update": times["loads_us"] / times["step_us"],
+             "limit clips (2)": 2 * times["clip_us"] / times["step_us"]}
+    share["rest (state updates, events, copies)"] = 1 - sum(share.values())
     return {"batch": batch, "dt_s": dt, "n_slot": len(model.slot_bus),
             "sweeps": model.sweeps, "kernels_per_step": kernels(step_text),
             "us_per_rollout_step": {k: round(v, 3) for k, v in times.items()},

@@ -68,9 +68,11 @@ def test_cli_writes_the_documented_json_figures_and_study(tmp_path):
     assert main(["--study", str(out.with_suffix(".study.toml")), "--tasks", "train",
                  "--out", str(again)]) == 0, "the saved study reproduces the run"
     # the plotting run traces its episodes (a full scan), this one stops them when done
-    # (a while loop): the same episodes, compiled apart, to float32 rounding
+    # (a while loop): the same episodes, compiled apart, so float32 rounding differs over
+    # 5000 steps (1.3e-5 relative seen); 1e-4 stays far below the step's own error (p99
+    # |ΔV| 2e-4 p.u. against the float64 reference), where a flipped stall would not
     for a, b in zip(json.loads(again.read_text())["tasks"], data["tasks"]):
-        assert a.pop("reward") == pytest.approx(b.pop("reward"), rel=1e-5) and a == b
+        assert a.pop("reward") == pytest.approx(b.pop("reward"), rel=1e-4) and a == b
     assert main(["--controller", "ppo", "--out", str(out)]) == 2
     assert main(["--tasks", "holdout", "--out", str(out)]) == 2
 
