@@ -6,8 +6,9 @@
 For a batch of the study's training tasks at its first operating point, during the fault,
 on one CPU device:
 - kernels: the top-level instructions of the compiled, batched Heun step (what the CPU
-  runs one after another), by kind, and how many of its fusions hold complex numbers,
-  transposes, gathers or scatters;
+  runs one after another), by kind, how many of its fusions hold complex numbers,
+  transposes, gathers or scatters, and its sine and cosine instructions (XLA copies one
+  into every fusion that reads it);
 - time (µs per rollout-step, best of `--calls` calls of 50 steps each) of the whole step,
   of the network solution alone (one `solve_network`; a step makes two), of one Euler
   stage (network + device models + state update), of the load models' discrete update
@@ -55,7 +56,8 @@ def kernels(compiled_text: str) -> dict:
                                   ("gather", r" gather\("), ("scatter", r" scatter\(")):
                 content[kind] += bool(re.search(pattern, line + body))
     return {"total": sum(ops.values()), "by_opcode": dict(ops.most_common()),
-            "fusions_with": dict(content)}
+            "fusions_with": dict(content),
+            "sin_cos": len(re.findall(r"= \S+ (?:sine|cosine)\(", compiled_text))}
 
 
 def _best_us(fn, args, calls: int, rollout_steps: int) -> float:
