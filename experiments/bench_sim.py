@@ -66,10 +66,11 @@ CASES = {  # name: (raw, dyr, models dropped for both simulators)
 
 
 def write_report(path: str, **fields) -> None:
-    """Write the benchmark JSON: machine, JAX version, backend and device count, then
+    """Write the benchmark JSON: machine, JAX version, backend, device kind and count, then
     `fields`; say where it went."""
     report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
-              "backend": jax.default_backend(), "devices": len(jax.devices()), **fields}
+              "backend": jax.default_backend(), "device_kind": jax.devices()[0].device_kind,
+              "devices": len(jax.devices()), **fields}
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text(json.dumps(report, indent=2))
     print(f"wrote {path}")

@@ -28,7 +28,7 @@ BASELINE = "cae8d39"  # the code before the performance issue (15)
 
 def bench_train_row(tree: Path, study: str, devices: int, repeats: int, out: Path) -> dict:
     """One `experiments.bench_train` run of the tree at `tree` in a fresh process: its case
-    (rollouts_per_iteration, runs).
+    (runs, each with rollouts_per_iteration).
 
     Commits before the studies-as-data change name a built-in study `--cases`."""
     flag = "--studies" if "--studies" in (tree / "experiments/bench_train.py").read_text() \
@@ -54,7 +54,7 @@ def speedup(baseline: str, studies, device_counts, rounds: int, repeats: int) ->
                             case = bench_train_row(tree, study, devices, repeats,
                                                    Path(tmp) / "run.json")
                             times[side].append(case["runs"][0]["s_per_iteration"])
-                    rollouts = case["rollouts_per_iteration"]
+                    rollouts = case["runs"][0]["rollouts_per_iteration"]  # this tree's row
                     best = {side: min(t) for side, t in times.items()}
                     rows.append({"study": study, "devices": devices,
                                  "s_per_iteration": best, "all_s_per_iteration": times,

@@ -2,14 +2,16 @@
 device count.
 
     python -m experiments.bench_train [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
-        [--devices 1 2] [--repeats 2] [--out bench_results/train.json]
+        [--devices 1 2] [--directions N ...] [--task-batch M] [--repeats 2]
+        [--out bench_results/train.json]
 
 Each built-in study runs with the defaults of its training command (LSTM; 39-bus N = 16,
 b = 8; 300-bus N = 128, b = 64; m = 9 tasks, 10 s episodes), so an iteration is 2·N·m
 rollouts: 288 (39-bus) and 2304 (300-bus); a study file runs with those of
 `experiments.train` (the 39-bus ones). The rollout batch is sharded over a 1-D mesh of
-the first `d` CPU devices (or of GPUs, where the backend has them). The first call (compile +
-run) and the best of `--repeats` later calls are timed.
+the first `d` CPU devices (or of GPUs, where the backend has them). `--directions` sweeps
+the batch: N directions make 2·N·m rollouts per iteration (b = N/2). The first call
+(compile + run) and the best of `--repeats` later calls are timed.
 """
 from __future__ import annotations
 
@@ -37,42 +39,47 @@ TASKS_PER_ITERATION = 9
 EPISODE = 10.0  # s
 
 
-def bench_case(case: str, device_counts, repeats: int, task_batch: int | None = None) -> dict:
+def bench_case(case: str, device_counts, repeats: int, task_batch: int | None = None,
+               directions=(None,)) -> dict:
+    """Time a `case` iteration for every direction count N in `directions` (None: the
+    training command's; b = N/2 as in both training commands) on every device count."""
     defaults = DEFAULTS.get(case, PLAIN)
     study = load_study(case)
-    config = ParsConfig(directions=defaults["directions"], top=defaults["top"],
-                        decay=defaults["decay"], tasks_per_iteration=TASKS_PER_ITERATION,
-                        task_batch=task_batch or defaults["task_batch"])
     hidden = tuple(int(h) for h in defaults["hidden"].split(","))
-    rollouts = 2 * config.directions * config.tasks_per_iteration
     result = {"case": case, "policy": defaults["policy"], "hidden": list(hidden),
-              "directions": config.directions, "top": config.top,
-              "tasks_per_iteration": config.tasks_per_iteration,
-              "task_batch": config.task_batch,
-              "rollouts_per_iteration": rollouts, "runs": []}
-    for n_dev in device_counts:
-        mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
-        start = time.perf_counter()
-        trainer = build(study, defaults["policy"], hidden, config, 1, EPISODE,
-                        mesh=mesh)
-        build_s = time.perf_counter() - start
-        state = init_state(trainer.policy, config)
-        data = jax.device_put((trainer.tasks, trainer.data))
+              "tasks_per_iteration": TASKS_PER_ITERATION,
+              "task_batch": task_batch or defaults["task_batch"], "runs": []}
+    for n_dir in directions:
+        n_dir = n_dir or defaults["directions"]
+        config = ParsConfig(directions=n_dir, top=max(1, n_dir * defaults["top"]
+                                                      // defaults["directions"]),
+                            decay=defaults["decay"], tasks_per_iteration=TASKS_PER_ITERATION,
+                            task_batch=task_batch or defaults["task_batch"])
+        rollouts = 2 * config.directions * config.tasks_per_iteration
+        for n_dev in device_counts:
+            mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
+            start = time.perf_counter()
+            trainer = build(study, defaults["policy"], hidden, config, 1, EPISODE, mesh=mesh)
+            build_s = time.perf_counter() - start
+            state = init_state(trainer.policy, config)
+            data = jax.device_put((trainer.tasks, trainer.data))
 
-        def step():
-            return trainer.iteration(state, *data)
+            def step():
+                return trainer.iteration(state, *data)
 
-        (state, _), first = _timed(step)
-        warm = []
-        for _ in range(repeats):
-            (state, metrics), wall = _timed(step)
-            warm.append(wall)
-        row = {"devices": n_dev, "build_s": round(build_s, 2), "first_call_s": round(first, 2),
-               "s_per_iteration": round(min(warm), 2),
-               "rollouts_per_s": round(rollouts / min(warm), 1),
-               "reward_mean_last": round(float(metrics["reward_mean"]), 1)}
-        print(case, row, flush=True)
-        result["runs"].append(row)
+            (state, _), first = _timed(step)
+            warm = []
+            for _ in range(repeats):
+                (state, metrics), wall = _timed(step)
+                warm.append(wall)
+            row = {"directions": config.directions, "top": config.top,
+                   "rollouts_per_iteration": rollouts, "devices": n_dev,
+                   "build_s": round(build_s, 2), "first_call_s": round(first, 2),
+                   "s_per_iteration": round(min(warm), 3),
+                   "rollouts_per_s": round(rollouts / min(warm), 1),
+                   "reward_mean_last": round(float(metrics["reward_mean"]), 1)}
+            print(case, row, flush=True)
+            result["runs"].append(row)
     return result
 
 
@@ -84,13 +91,16 @@ def main(argv=None) -> None:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--task-batch", type=int,
                         help="tasks per rollout batch (default: the training command's)")
+    parser.add_argument("--directions", nargs="*", type=int, default=[None],
+                        help="direction counts N to sweep, top b = N/2 (default: the "
+                             "training command's)")
     parser.add_argument("--out", default="bench_results/train.json")
     args = parser.parse_args(argv)
     if max(args.devices) > len(jax.devices()):
         parser.error(f"--devices {max(args.devices)}: only {len(jax.devices())} available")
     write_report(args.out, episode_s=EPISODE,
-                 cases=[bench_case(c, args.devices, args.repeats, args.task_batch)
-                        for c in args.studies])
+                 cases=[bench_case(c, args.devices, args.repeats, args.task_batch,
+                                   args.directions) for c in args.studies])
 
 
 if __name__ == "__main__":
