@@ -61,6 +61,10 @@ def _plt():
     return plt
 
 
+def _seeds(n: int) -> str:
+    return f"{n} seed" if n == 1 else f"{n} seeds"
+
+
 def _save(fig, path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -85,11 +89,11 @@ def _curves(runs: Runs, configs: list[tuple[str, int, str]], title: str, path) -
         numbers[f"converged at iteration, {label}"] = convergence_iteration(
             it, mean, min(window, len(mean)))
         wall = np.diff(curves["wall_s"], prepend=0.0)  # per iteration; the first compiles
-        numbers[f"s per iteration ({reward.shape[0]} seeds in one program), {label}"] = round(
+        numbers[f"s per iteration ({_seeds(reward.shape[0])} in one program), {label}"] = round(
             float(wall[1:].mean() if len(wall) > 1 else wall[0]), 2)
     ax.set_xlabel("iteration")
     ax.set_ylabel("reward per episode (mean of the perturbed rollouts)")
-    ax.set_title(f"{title} — {runs.study.name}, mean ± std over {runs.settings.seeds} seeds")
+    ax.set_title(f"{title} — {runs.study.name}, mean ± std over {_seeds(runs.settings.seeds)}")
     ax.legend()
     ax.grid(alpha=0.3)
     _save(fig, path)
@@ -101,14 +105,14 @@ def fig6a(runs: Runs, path) -> dict:
     numbers = _curves(runs, [(kind, n, kind) for kind in ("linear", "fnn", "lstm")],
                       f"PARS policies, N = {n}", path)
     return {"numbers": numbers, "settings": f"N = {n}, b = {max(1, n // 2)}, "
-            f"m = {runs.settings.tasks_per_iteration}, {runs.settings.seeds} seeds, "
+            f"m = {runs.settings.tasks_per_iteration}, {_seeds(runs.settings.seeds)}, "
             f"{runs.settings.iterations} iterations"}
 
 
 def _sweep(runs: Runs, sweep, path) -> dict:
     numbers = _curves(runs, [("lstm", n, f"N={n}") for n in sweep], "LSTM policy", path)
     return {"numbers": numbers, "settings": f"LSTM, N = {list(sweep)}, b = N/2, "
-            f"m = {runs.settings.tasks_per_iteration}, {runs.settings.seeds} seeds, "
+            f"m = {runs.settings.tasks_per_iteration}, {_seeds(runs.settings.seeds)}, "
             f"{runs.settings.iterations} iterations"}
 
 
@@ -121,8 +125,8 @@ def fig9(runs: Runs, path) -> dict:
 
 
 def fig7(runs: Runs, path) -> dict:
-    """Speed-up of one PARS iteration over 1, 2, ... devices of this process and over
-    `processes` processes of one device each."""
+    """Speed-up of one PARS iteration over 1, 2, ... devices of this process, over
+    `processes` processes of one device each and, from `gpu_timing`, on one GPU."""
     plt = _plt()
     devices = jax.devices()
     counts = sorted({1, *[k for k in (2, 4, 8, 16) if k <= len(devices)], len(devices)})
@@ -133,6 +137,10 @@ def fig7(runs: Runs, path) -> dict:
         seconds[f"{runs.settings.processes} processes × 1 CPU device"] = runs.process_seconds(
             runs.settings.processes)
         workers.append(runs.settings.processes)
+    if runs.settings.gpu_timing:
+        label, s = runs.gpu_seconds()
+        seconds[label] = s
+        workers.append(1)
     base = seconds[f"1 {devices[0].platform} device(s)"]
     fig, ax = plt.subplots(figsize=(6, 4))
     for (label, s), k in zip(seconds.items(), workers):
@@ -242,7 +250,7 @@ def fig10_11(runs: Runs, path) -> dict:
         wall, env_steps, reward = wall[kept], env_steps[kept], reward[:, kept]
         mean, std = np.nanmean(reward, 0), np.nanstd(reward, 0)
         for ax, x in zip(axes, (wall, env_steps)):
-            line, = ax.plot(x, mean, lw=1, label=f"{label} ({reward.shape[0]} seeds)")
+            line, = ax.plot(x, mean, lw=1, label=f"{label} ({_seeds(reward.shape[0])})")
             ax.fill_between(x, mean - std, mean + std, color=line.get_color(), alpha=0.2)
         # the moving-average window spans as many environment steps as PARS's
         span = s.window * (curves["PARS"][1][0] if len(curves["PARS"][1]) else 1)
@@ -266,7 +274,7 @@ def fig10_11(runs: Runs, path) -> dict:
     fig.suptitle(f"PARS vs PPO on {runs.study.name}")
     _save(fig, path)
     return {"numbers": numbers, "settings": f"PARS LSTM N = {s.directions}, "
-            f"{s.iterations} iterations × {s.seeds} seeds in one program; PPO {s.ppo_seeds} "
+            f"{s.iterations} iterations × {_seeds(s.seeds)} in one program; PPO {s.ppo_seeds} "
             f"seeds × {_ppo_steps(runs)} env steps (Table II settings), one after another"}
 
 

@@ -46,6 +46,8 @@ class Settings:
       latency_calls: calls timed per controller (tab3).  window: moving-average window, its.
       policy, ppo_policy: an already trained PARS / PPO policy folder for the case studies,
         fig12 and tab3's evaluations in place of training one (None: train).
+      gpu_timing: an `experiments.bench_train` JSON measured on a GPU machine; fig7 adds its
+        1-device iteration time for this study and N = directions (None: none).
     """
 
     iterations: int = 300
@@ -67,6 +69,7 @@ class Settings:
     window: int = SMOOTHING
     policy: str | None = None
     ppo_policy: str | None = None
+    gpu_timing: str | None = None
 
 
 FULL = Settings()
@@ -100,6 +103,7 @@ class Runs:
         self.study_key = _hash(self.study_file.read_text())
         n_buses = len(self.study.points[0].case.buses.number)
         self.preset = PRESETS["large" if n_buses > 100 else "small"]
+        self.trainings: set[Path] = set()  # PARS / PPO run folders used since last cleared
 
     def folder(self, kind: str, inputs: dict) -> Path:
         """OUT/runs/KIND-HASH for `inputs` (with the study), and its inputs.json."""
@@ -120,6 +124,7 @@ class Runs:
                  "--iterations", str(s.iterations), "--seeds", str(s.seeds)]
         folder = self.folder(f"pars_{policy}_N{directions}", {"flags": flags})
         rows = metrics_rows(folder / "metrics.jsonl")
+        self.trainings.add(folder)
         if rows and rows[-1]["iteration"] >= s.iterations and (folder / "policy").is_dir():
             return folder
         from experiments.train import main as train
@@ -127,6 +132,12 @@ class Runs:
         if train(["--study", str(self.study_file), *flags, "--out", str(folder), *resume]):
             raise RuntimeError(f"PARS training in {folder} failed")
         return folder
+
+    def training_seconds(self) -> float:
+        """Wall s the trainings in `trainings` took, summed from their metrics (first
+        iterations include compilation), over every invocation they ran in."""
+        return sum(r["wall_s"] for folder in self.trainings
+                   for r in metrics_rows(folder / "metrics.jsonl"))
 
     def pars_curves(self, folder: Path) -> dict:
         """Per-seed learning curves of a PARS run: iteration (n,), reward (seeds, n) (mean over
@@ -152,6 +163,7 @@ class Runs:
         s = self.settings
         flags = ["--env-steps", str(env_steps), "--seed", str(seed), *s.ppo_flags]
         folder = self.folder(f"ppo_seed{seed}", {"flags": flags})
+        self.trainings.add(folder)
         if (folder / "policy").is_dir():
             return folder
         from experiments.train_ppo import main as train_ppo
@@ -231,6 +243,20 @@ class Runs:
                                                                trainer.data))
             times.append(time.perf_counter() - start)
         return float(np.median(times))
+
+    def gpu_seconds(self) -> tuple[str, float]:
+        """(label, s per iteration) of this study's LSTM iteration with N = directions on one
+        device, read from the `settings.gpu_timing` benchmark JSON (best of its warm calls)."""
+        path = Path(self.settings.gpu_timing)
+        report = json.loads(path.read_text())
+        rows = [r for case in report["cases"] if case["case"] == self.study.name
+                for r in case["runs"]
+                if r["directions"] == self.settings.directions and r["devices"] == 1]
+        if report.get("backend") != "gpu" or not rows:
+            raise ValueError(f"{path}: no GPU row for study {self.study.name!r} with N = "
+                             f"{self.settings.directions} on 1 device (backend "
+                             f"{report.get('backend')!r})")
+        return f"1 {report['device_kind']} ({path.name})", rows[0]["s_per_iteration"]
 
     def process_seconds(self, processes: int) -> float:
         """Median seconds per iteration of the same training as `iteration_seconds` run as

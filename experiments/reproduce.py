@@ -2,7 +2,7 @@
 
     python -m experiments.reproduce --study ieee39_fidvr|FILE.toml --out results/repro39 \
         [--only fig6a,fig8,...] [--quick] [--iterations N] [--seeds K] [--ppo-seeds K]
-        [--policy DIR/policy] [--ppo-policy DIR/policy]
+        [--policy DIR/policy] [--ppo-policy DIR/policy] [--gpu-timing BENCH.json]
     make reproduce
 
 Experiments (`experiments.repro_figures`): fig6a (linear / FNN / LSTM learning curves, mean ±
@@ -13,9 +13,10 @@ PPO on the test set), tab3 (decision time), fig13 (300-bus case study, all four
 controllers). Every experiment runs on the given study; the paper's values are for the case
 the report names. Seeds of one configuration train as one vmapped program.
 
-Output folder: OUT/<id>.png and OUT/<id>.json (numbers, settings, wall time) per
-experiment, OUT/REPORT.md (every figure; our numbers beside the paper's), OUT/runs/ (the
-trainings and evaluations, named by a hash of their inputs: reused when finished, resumed
+Output folder: OUT/<id>.png and OUT/<id>.json (numbers, settings, wall time of this
+invocation and the trainings' wall time summed over all invocations) per experiment,
+OUT/REPORT.md (every figure; our numbers beside the paper's), OUT/runs/ (the trainings and
+evaluations, named by a hash of their inputs: reused when finished, resumed
 when interrupted, recomputed when an input changes). `--quick` runs everything with tiny
 settings (2 iterations, 1.5-s episodes, a few test tasks) as a check of the pipeline.
 """
@@ -46,10 +47,12 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
         if only and name not in only:
             continue
         print(f"--- {name}: {PAPER[name]['title']}", flush=True)
+        runs.trainings.clear()
         start = time.perf_counter()
         result = experiment(runs, runs.out / f"{name}.png")
         result.update(id=name, figure=f"{name}.png", wall_s=round(time.perf_counter() - start, 1),
-                      study=runs.study.name, quick=quick)
+                      training_s=round(runs.training_seconds(), 1), study=runs.study.name,
+                      quick=quick)
         (runs.out / f"{name}.json").write_text(json.dumps(result, indent=1))
         results[name] = result
     write_report(runs.out, settings, quick)
@@ -69,7 +72,7 @@ def write_report(out: Path, settings, quick: bool) -> None:
             continue
         result, paper = json.loads(path.read_text()), PAPER[name]
         lines += [f"## {name}: {paper['title']}", "", f"![{name}]({result['figure']})", "",
-                  f"- ours: {result['study']}, {result['settings']}; {result['wall_s']} s here"
+                  f"- ours: {result['study']}, {result['settings']}; {_times(result)}"
                   + (" (--quick)" if result.get("quick") else ""),
                   f"- paper: {paper['case']}, {paper['settings']}", "",
                   "| quantity | ours | paper |", "| --- | --- | --- |"]
@@ -80,6 +83,15 @@ def write_report(out: Path, settings, quick: bool) -> None:
                          f"{_cell(paper['values'].get(key))} |")
         lines.append("")
     (out / "REPORT.md").write_text("\n".join(lines))
+
+
+def _times(result: dict) -> str:
+    """Wall time of the experiment's last invocation, and its trainings' over all of theirs
+    (a resumed or reused training ran mostly in earlier invocations)."""
+    text = f"{result['wall_s']} s in its last invocation"
+    if result.get("training_s"):
+        text += f"; its trainings took {result['training_s']} s in all"
+    return text
 
 
 def _cell(value) -> str:
@@ -100,10 +112,13 @@ def main(argv: list[str] | None = None) -> int:
                                     "(default: train one)")
     p.add_argument("--ppo-policy", help="a trained PPO policy folder for fig12, fig13 "
                                         "(default: train one)")
+    p.add_argument("--gpu-timing", help="an experiments.bench_train JSON measured on a GPU "
+                                        "machine: fig7 adds its iteration time")
     args = p.parse_args(argv)
     overrides = {k: v for k, v in (("iterations", args.iterations), ("seeds", args.seeds),
                                    ("ppo_seeds", args.ppo_seeds), ("policy", args.policy),
-                                   ("ppo_policy", args.ppo_policy)) if v is not None}
+                                   ("ppo_policy", args.ppo_policy),
+                                   ("gpu_timing", args.gpu_timing)) if v is not None}
     only = [s.strip() for s in args.only.split(",") if s.strip()] if args.only else None
     try:
         run(args.study, args.out, only, args.quick, **overrides)

@@ -1,15 +1,17 @@
 """`experiments.reproduce --quick`: every experiment writes its figure and numbers, REPORT.md
-names each beside the paper's values, a second run reuses every finished run, and the
-convergence rule on curves whose answer is known by hand."""
+names each beside the paper's values, a second run reuses every finished run and reports its
+trainings' time, fig7's GPU timing file, and the convergence rule on curves whose answer is
+known by hand."""
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
 from experiments.repro_figures import EXPERIMENTS, PAPER
-from experiments.repro_runs import convergence_iteration
+from experiments.repro_runs import QUICK, Runs, convergence_iteration
 from experiments.reproduce import main, run
 
 
@@ -51,6 +53,26 @@ def test_a_second_run_reuses_the_finished_runs(quick):
     run("ieee39_fidvr", quick, ["fig6b", "fig8", "fig12"], quick=True)
     assert sorted(p.name for p in (quick / "runs").iterdir()) == folders, "nothing new ran"
     assert {p: p.stat().st_mtime_ns for p in trained} == before, "no training touched"
+    fig6b = json.loads((quick / "fig6b.json").read_text())
+    walls = [json.loads(line)["wall_s"] for n in QUICK.sweep
+             for line in next((quick / "runs").glob(f"pars_lstm_N{n}-*"))
+             .joinpath("metrics.jsonl").read_text().splitlines()]
+    assert fig6b["training_s"] == pytest.approx(sum(walls), abs=0.05), \
+        "the reused trainings' time, from their metrics"
+    assert f"its trainings took {fig6b['training_s']} s in all" in (quick / "REPORT.md").read_text()
+
+
+def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(quick, tmp_path):
+    row = {"directions": QUICK.directions, "devices": 1, "s_per_iteration": 0.321}
+    bench = {"backend": "gpu", "device_kind": "NVIDIA H100 80GB HBM3",
+             "cases": [{"case": "ieee39_fidvr", "runs": [{**row, "directions": 64}, row]}]}
+    path = tmp_path / "train.json"
+    path.write_text(json.dumps(bench))
+    runs = Runs("ieee39_fidvr", quick, dataclasses.replace(QUICK, gpu_timing=str(path)))
+    assert runs.gpu_seconds() == ("1 NVIDIA H100 80GB HBM3 (train.json)", 0.321)
+    path.write_text(json.dumps({**bench, "backend": "cpu"}))
+    with pytest.raises(ValueError, match="no GPU row for study 'ieee39_fidvr' with N = 2"):
+        runs.gpu_seconds()
 
 
 def test_unknown_experiments_are_named(tmp_path, capsys):
