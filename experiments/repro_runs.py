@@ -139,6 +139,12 @@ class Runs:
         return sum(r["wall_s"] for folder in self.trainings
                    for r in metrics_rows(folder / "metrics.jsonl"))
 
+    def training_devices(self) -> list[str]:
+        """The devices ('COUNT × KIND') the trainings in `trainings` ran on, from their
+        metrics; 'unrecorded devices' for lines written before metrics named them."""
+        return sorted({r.get("device", "unrecorded devices") for folder in self.trainings
+                       for r in metrics_rows(folder / "metrics.jsonl")})
+
     def pars_curves(self, folder: Path) -> dict:
         """Per-seed learning curves of a PARS run: iteration (n,), reward (seeds, n) (mean over
         the iteration's perturbed rollouts), wall_s (n,) cumulative, episodes (n,) per seed."""

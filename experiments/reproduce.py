@@ -14,9 +14,9 @@ controllers). Every experiment runs on the given study; the paper's values are f
 the report names. Seeds of one configuration train as one vmapped program.
 
 Output folder: OUT/<id>.png and OUT/<id>.json (numbers, settings, wall time of this
-invocation and the trainings' wall time summed over all invocations) per experiment,
-OUT/REPORT.md (every figure; our numbers beside the paper's), OUT/runs/ (the trainings and
-evaluations, named by a hash of their inputs: reused when finished, resumed
+invocation, the trainings' wall time summed over all invocations and the devices they ran on)
+per experiment, OUT/REPORT.md (every figure; our numbers beside the paper's), OUT/runs/ (the
+trainings and evaluations, named by a hash of their inputs: reused when finished, resumed
 when interrupted, recomputed when an input changes). `--quick` runs everything with tiny
 settings (2 iterations, 1.5-s episodes, a few test tasks) as a check of the pipeline.
 """
@@ -51,8 +51,8 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
         start = time.perf_counter()
         result = experiment(runs, runs.out / f"{name}.png")
         result.update(id=name, figure=f"{name}.png", wall_s=round(time.perf_counter() - start, 1),
-                      training_s=round(runs.training_seconds(), 1), study=runs.study.name,
-                      quick=quick)
+                      training_s=round(runs.training_seconds(), 1),
+                      trained_on=runs.training_devices(), study=runs.study.name, quick=quick)
         (runs.out / f"{name}.json").write_text(json.dumps(result, indent=1))
         results[name] = result
     write_report(runs.out, settings, quick)
@@ -90,7 +90,8 @@ def _times(result: dict) -> str:
     (a resumed or reused training ran mostly in earlier invocations)."""
     text = f"{result['wall_s']} s in its last invocation"
     if result.get("training_s"):
-        text += f"; its trainings took {result['training_s']} s in all"
+        text += (f"; its trainings took {result['training_s']} s in all, on "
+                 + ", ".join(result.get("trained_on") or ["unrecorded devices"]))
     return text
 
 

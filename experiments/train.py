@@ -9,7 +9,8 @@ with the paper's hyper-parameters); every hyper-parameter has a flag. Each itera
 m tasks of the study's training set across its operating points, uniformly or stratified
 (`--task-sampling`); all operating points share one compiled iteration. Output folder DIR:
   study.toml      the resolved study (`--resume` without --study reads it back)
-  metrics.jsonl   one line per iteration: iteration, reward_mean, reward_max, wall_s, rollouts
+  metrics.jsonl   one line per iteration: iteration, reward_mean, reward_max, wall_s, rollouts,
+                  device (the devices it ran on, "COUNT × KIND": a run resumed elsewhere says so)
   checkpoints/    orbax checkpoints every --checkpoint-every iterations and at the end
   policy/         the trained policy (experiments.evaluate --controller policy:DIR/policy)
   policies/NNNNN/ the policy after iteration NNNNN, at every checkpoint (all kept: the last
@@ -108,6 +109,11 @@ class Trainer(NamedTuple):
     env_config: object
 
 
+def device_label(count: int) -> str:
+    """'COUNT × KIND' for `count` devices of this backend, e.g. '2 × cpu' (metrics lines)."""
+    return f"{count} × {jax.devices()[0].device_kind}"
+
+
 def build(study, policy_kind: str, hidden: tuple[int, ...], config, history: int | None = None,
           episode: float | None = None, task_set: str = "train", sampling: str = "uniform",
           mesh=None, seeds: int | None = None) -> Trainer:
@@ -192,6 +198,7 @@ def _train(args) -> int:
         metrics_path.write_text("".join(json.dumps(m) + "\n" for m in log))
     done = int(np.max(state.iteration))
     rollouts = log[-1]["rollouts"] if log else 0
+    device = device_label(jax.device_count())
     bar = tqdm(total=args.iterations, initial=done, unit="it", disable=not primary)
     while done < args.iterations:
         start = time.perf_counter()
@@ -201,7 +208,7 @@ def _train(args) -> int:
         done, rollouts = done + 1, rollouts + int(np.ravel(metrics["rollouts"])[0])
         row = {"iteration": done, "reward_mean": np.asarray(metrics["reward_mean"]).tolist(),
                "reward_max": np.asarray(metrics["reward_max"]).tolist(),
-               "wall_s": round(wall, 3), "rollouts": rollouts}
+               "wall_s": round(wall, 3), "rollouts": rollouts, "device": device}
         log.append(row)
         if primary:
             with open(metrics_path, "a") as metrics_file:

@@ -10,6 +10,7 @@ over the study's operating points and faults) and runs --epochs passes over them
 iterations run in jitted chunks of --eval-every; after each chunk the host writes:
   metrics.jsonl   one line per chunk: iteration, env_steps, wall_s (training time of the
                   chunk, s, as PARS's per-iteration wall_s; the first includes compilation),
+                  device (one device: "1 × KIND"),
                   wall_total_s (cumulative), reward_mean (mean return of the deterministic
                   policy over every task of the training set, all operating points: the
                   figure PARS's reward_mean estimates, PARS averaging its perturbed rollouts
@@ -41,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.studyargs import add_study_arguments, study_from_args
+from experiments.train import device_label
 
 # flag -> PPOConfig field (one-to-one; the defaults are PPOConfig's)
 FLAGS = {"envs": "envs", "rollout_steps": "rollout_steps", "epochs": "epochs",
@@ -206,6 +208,7 @@ def _train(args) -> int:
         _, evaluation = rollout_specs(study, env, apply, policy_params, specs, carry)
         ended = int(np.sum(state.env_state.returns_count))
         row = {"iteration": done, "env_steps": done * config.batch, "wall_s": round(wall, 3),
+               "device": device_label(1),
                "wall_total_s": round(wall_total, 3),
                "reward_mean": float(np.mean(evaluation["reward"])),
                "n_recovered": int(np.sum(evaluation["recovered"])),

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import jax
 import numpy as np
 import pytest
 
@@ -59,7 +60,9 @@ def test_a_second_run_reuses_the_finished_runs(quick):
              .joinpath("metrics.jsonl").read_text().splitlines()]
     assert fig6b["training_s"] == pytest.approx(sum(walls), abs=0.05), \
         "the reused trainings' time, from their metrics"
-    assert f"its trainings took {fig6b['training_s']} s in all" in (quick / "REPORT.md").read_text()
+    assert fig6b["trained_on"] == [f"{jax.device_count()} × cpu"], "from the metrics lines"
+    assert (f"its trainings took {fig6b['training_s']} s in all, on {jax.device_count()} × cpu"
+            in (quick / "REPORT.md").read_text())
 
 
 def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(quick, tmp_path):
