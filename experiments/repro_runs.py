@@ -133,17 +133,13 @@ class Runs:
             raise RuntimeError(f"PARS training in {folder} failed")
         return folder
 
-    def training_seconds(self) -> float:
-        """Wall s the trainings in `trainings` took, summed from their metrics (first
-        iterations include compilation), over every invocation they ran in."""
-        return sum(r["wall_s"] for folder in self.trainings
-                   for r in metrics_rows(folder / "metrics.jsonl"))
-
-    def training_devices(self) -> list[str]:
-        """The devices ('COUNT × KIND') the trainings in `trainings` ran on, from their
-        metrics; 'unrecorded devices' for lines written before metrics named them."""
-        return sorted({r.get("device", "unrecorded devices") for folder in self.trainings
-                       for r in metrics_rows(folder / "metrics.jsonl")})
+    def training_time(self) -> tuple[float, list[str]]:
+        """(wall s, devices) of the trainings in `trainings`, from their metrics over every
+        invocation they ran in: the s summed (first iterations include compilation), the
+        devices ('COUNT × KIND') listed, 'unrecorded devices' for lines that predate them."""
+        rows = [r for folder in self.trainings for r in metrics_rows(folder / "metrics.jsonl")]
+        return (sum(r["wall_s"] for r in rows),
+                sorted({r.get("device", "unrecorded devices") for r in rows}))
 
     def pars_curves(self, folder: Path) -> dict:
         """Per-seed learning curves of a PARS run: iteration (n,), reward (seeds, n) (mean over

@@ -50,9 +50,11 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
         runs.trainings.clear()
         start = time.perf_counter()
         result = experiment(runs, runs.out / f"{name}.png")
-        result.update(id=name, figure=f"{name}.png", wall_s=round(time.perf_counter() - start, 1),
-                      training_s=round(runs.training_seconds(), 1),
-                      trained_on=runs.training_devices(), study=runs.study.name, quick=quick)
+        wall_s = time.perf_counter() - start
+        training_s, trained_on = runs.training_time()
+        result.update(id=name, figure=f"{name}.png", wall_s=round(wall_s, 1),
+                      training_s=round(training_s, 1), trained_on=trained_on,
+                      study=runs.study.name, quick=quick)
         (runs.out / f"{name}.json").write_text(json.dumps(result, indent=1))
         results[name] = result
     write_report(runs.out, settings, quick)

@@ -197,6 +197,7 @@ def _train(args) -> int:
     specs = study.tasks(args.task_set)
     done = log[-1]["iteration"] if log else 0
     wall_total = log[-1]["wall_total_s"] if log else 0.0
+    device = device_label(1)
     bar = tqdm(total=total, initial=done, unit="it")
     while done < total:
         n = min(args.eval_every, total - done)
@@ -208,7 +209,7 @@ def _train(args) -> int:
         _, evaluation = rollout_specs(study, env, apply, policy_params, specs, carry)
         ended = int(np.sum(state.env_state.returns_count))
         row = {"iteration": done, "env_steps": done * config.batch, "wall_s": round(wall, 3),
-               "device": device_label(1),
+               "device": device,
                "wall_total_s": round(wall_total, 3),
                "reward_mean": float(np.mean(evaluation["reward"])),
                "n_recovered": int(np.sum(evaluation["recovered"])),
