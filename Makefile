@@ -26,6 +26,7 @@ bench:  ## benchmarks; figures go to bench_results/*.json
 	$(PY) -m experiments.bench_cmld --out bench_results/cmld.json
 	$(PY) -m experiments.bench_latency --out bench_results/latency.json
 	$(PY) -m experiments.profile_step --out bench_results/profile_step.json
+	$(PY) -m experiments.bench_vecmath --out bench_results/vecmath.json
 	$(PY) -m experiments.bench_speedup --rounds 1 --out bench_results/speedup.json
 	$(PY) -m experiments.bench_scale --out bench_results/scale.json
 

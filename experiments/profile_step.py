@@ -7,8 +7,9 @@ For a batch of the study's training tasks at its first operating point, during t
 on one CPU device:
 - kernels: the top-level instructions of the compiled, batched Heun step (what the CPU
   runs one after another), by kind, how many of its fusions hold complex numbers,
-  transposes, gathers or scatters, and its sine and cosine instructions (XLA copies one
-  into every fusion that reads it);
+  transposes, gathers or scatters, and its sine, cosine, power and atan2 instructions
+  (`scalar_math`: XLA:CPU evaluates them element by element, at 2–12 ns each, and copies
+  one into every fusion that reads it; `jaxgrid.vecmath` replaces them in the step);
 - time (µs per rollout-step, best of `--calls` calls of 50 steps each) of the whole step,
   of the network solution alone (one `solve_network`; a step makes two), of one Euler
   stage (network + device models + state update), of the load models' discrete update
@@ -57,7 +58,8 @@ def kernels(compiled_text: str) -> dict:
                 content[kind] += bool(re.search(pattern, line + body))
     return {"total": sum(ops.values()), "by_opcode": dict(ops.most_common()),
             "fusions_with": dict(content),
-            "sin_cos": len(re.findall(r"= \S+ (?:sine|cosine)\(", compiled_text))}
+            "scalar_math": dict(Counter(re.findall(r"= \S+ (sine|cosine|power|atan2)\(",
+                                                   compiled_text)))}
 
 
 def _best_us(fn, args, calls: int, rollout_steps: int) -> float:

@@ -80,7 +80,8 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
     current = (emf - vt) / model.z_source
     # (n_gen,) rotor-frame currents, concatenated on purpose: the concatenation is stored,
     # so the sin/cos inside are computed once; kept per group, XLA copies them into every
-    # kernel that reads them (`profile_step` sin_cos, 39-bus: 8 this way, 38 per group)
+    # kernel that reads them (`profile_step`, 39-bus: 8 sin/cos this way, 38 per group,
+    # when they were XLA's own)
     i_dq = jnp.concatenate([g.model.to_rotor(xs, current[_index(g)])
                             for g, xs in zip(model.machines, x.machines)])
     dw = machine_state(x, "dw")

@@ -44,6 +44,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrid import vecmath
 from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, Params, States,
                                  surrogate_gradient, timer_fires)
 
@@ -234,7 +235,7 @@ class Acmtblu1(LoadModel):
     def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:
         vmag = jnp.abs(v)
         measurable = (vmag > V_ANGLE_MIN) & (jnp.abs(v_old) > V_ANGLE_MIN)
-        step = jnp.angle(v * jnp.conj(jnp.where(measurable, v_old, v)))
+        step = vecmath.angle(v * jnp.conj(jnp.where(measurable, v_old, v)))
         f = 1.0 + jnp.where(measurable, step, 0.0) / (p["omega0"] * dt)
         vm = _lag_step(z["vm"], vmag, p["tv"], dt)
         fm = _lag_step(z["fm"], f, p["tf"], dt)
@@ -265,8 +266,9 @@ def _running_curve(p, vmag, axis: str, running2, xp=np):
     """Voltage term of the running curve for "p" or "q" (motor p.u.), region by `running2`."""
     up = xp.maximum(vmag - p["vbrk_adj"], 0.0)
     down = xp.maximum(p["vbrk_adj"] - vmag, 0.0)
-    one = p[f"k{axis}1"] * up ** p[f"n{axis}1"]
-    two = p[f"k{axis}2"] * down ** p[f"n{axis}2"]
+    pow_ = np.power if xp is np else vecmath.power
+    one = p[f"k{axis}1"] * pow_(up, p[f"n{axis}1"])
+    two = p[f"k{axis}2"] * pow_(down, p[f"n{axis}2"])
     return xp.where((running2 > 0) | (vmag < p["vbrk_adj"]), two, one)
 
 

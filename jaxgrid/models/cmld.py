@@ -85,6 +85,7 @@ from jaxgrid.models.acmotor import NO_DIP, Acmtblu1, MotorOptions
 from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, ModelError, Params, States,
                                  device_label, timer_fires)
 from jaxgrid.models.induction import Cim5bl, solve_slip, steady_state, transient_constants
+from jaxgrid.vecmath import power
 
 MOTORS = "abc"  # the three-phase motors A, B, C
 LL_OVER_LPP = 0.8  # Ll = 0.8·Lpp (WECC note on PSS/E's CMLD, spec §8 question 3)
@@ -415,8 +416,10 @@ def _static_power(p, vmag, dfm):
     """
     vc = jnp.maximum(vmag, STATIC_V_BREAK)
     r = vc / p["v_l0"]
-    shape_p = p["p1c"] * r ** p["p1e"] + p["p2c"] * r ** p["p2e"] + (1.0 - p["p1c"] - p["p2c"])
-    shape_q = p["q1c"] * r ** p["q1e"] + p["q2c"] * r ** p["q2e"] + (1.0 - p["q1c"] - p["q2c"])
+    shape_p = (p["p1c"] * power(r, p["p1e"]) + p["p2c"] * power(r, p["p2e"])
+               + (1.0 - p["p1c"] - p["p2c"]))
+    shape_q = (p["q1c"] * power(r, p["q1e"]) + p["q2c"] * power(r, p["q2e"])
+               + (1.0 - p["q1c"] - p["q2c"]))
     s = (p["p_st0"] * shape_p * (1.0 + p["pfrq"] * dfm)
          + 1j * p["q_st0"] * shape_q * (1.0 + p["qfrq"] * dfm))
     return s * (vmag / vc) ** 2

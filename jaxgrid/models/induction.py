@@ -50,6 +50,7 @@ from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, ModelError, Pa
                                  device_label, quadratic_saturation,
                                  quadratic_saturation_constants, safe, saturation_problem,
                                  timer_fires)
+from jaxgrid.vecmath import power
 
 SLIP_MIN = 1e-7             # smallest slip of the initialisation bracket (spec §5)
 SLIP_GRID = 700             # log-spaced slips in [SLIP_MIN, 1] scanned for breakdown
@@ -154,7 +155,7 @@ class Cim5bl(LoadModel):
     @classmethod
     def load_torque(cls, p: Params, w: Array) -> Array:
         """Mechanical load torque TL(ω), p.u. on Sm: T0·ω^D."""
-        return p["t0"] * jnp.maximum(w, W_TORQUE_MIN) ** p["d"]
+        return p["t0"] * power(jnp.maximum(w, W_TORQUE_MIN), p["d"])
 
     # ------------------------------------------------------------------ #
     # Initialisation (host, NumPy float64)

@@ -15,11 +15,13 @@ it (14 per step, 4 since this split, 39-bus study).
 """
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.models.base import (Con, DeviceModel, Params, States, quadratic_saturation,
                                  quadratic_saturation_constants, saturation_problem)
+from jaxgrid.vecmath import power, sincos
 
 _H = Con("h", "s", "inertia constant on MBASE (0: infinite bus, GENCLS only)", 0.0)
 _D = Con("d", "p.u.", "speed damping", 0.0)
@@ -34,8 +36,10 @@ def _x(name: str, info: str) -> Con:
 
 
 def to_network_frame(delta):
-    """exp(j(δ − π/2)), rotor (d + jq ordering of the spec) to network frame."""
-    return jnp.exp(1j * (delta - jnp.pi / 2))
+    """exp(j(δ − π/2)) = sin δ − j·cos δ: rotor (d + jq ordering of the spec) to network
+    frame, from `vecmath.sincos` (XLA:CPU's own sine and cosine are scalar code)."""
+    sin, cos = sincos(delta)
+    return jax.lax.complex(sin, -cos)
 
 
 def swing(p: Params, x: States, pm, te, omega_b: float) -> States:
@@ -298,7 +302,7 @@ class Gensal(Genrou):
 
 def exponential_saturation(x, n, s1):
     """PSS/E GENROE/GENSAE saturation Se(x) = S(1.0)·x^n with n = ln(S(1.2)/S(1.0))/ln 1.2."""
-    return jnp.where(x > 0, s1 * jnp.abs(x) ** n, 0.0)
+    return jnp.where(x > 0, s1 * power(jnp.abs(x), n), 0.0)
 
 
 class _ExponentialSaturation:
