@@ -8,7 +8,7 @@ on one CPU device:
 - kernels: the top-level instructions of the compiled, batched Heun step (what the CPU
   runs one after another), by kind, how many of its fusions hold complex numbers,
   transposes, gathers or scatters, and its sine, cosine, power and atan2 instructions
-  (`scalar_math`: XLA:CPU evaluates them element by element, at 2–12 ns each, and copies
+  (`scalar_math`: XLA:CPU evaluates them element by element, at 1.5–14 ns each, and copies
   one into every fusion that reads it; `jaxgrid.vecmath` replaces them in the step);
 - time (µs per rollout-step, best of `--calls` calls of 50 steps each) of the whole step,
   of the network solution alone (one `solve_network`; a step makes two), of one Euler

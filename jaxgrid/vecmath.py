@@ -1,17 +1,17 @@
 """Elementary functions that XLA:CPU vectorises, for the integration step's device code.
 
-XLA:CPU evaluates `jnp.sin`, `jnp.cos` and `jnp.power` one element at a time: 2–6 ns per
-float32 element on the development machine, against 0.05 for a multiply and 0.4 for
-`jnp.exp` or `jnp.log`, which it vectorises (README "Performance"). The step's rotor-frame
-rotations and load characteristics therefore use:
+XLA:CPU evaluates `jnp.sin`, `jnp.cos`, `jnp.power` and `jnp.angle` one element at a
+time: 1.5–14 ns per float32 element on the development machine, against 0.05 for a
+multiply and 0.3 for `jnp.exp`, which it vectorises (`experiments.bench_vecmath`; README
+"Performance"). The step's rotor-frame rotations and load characteristics therefore use:
 - `sincos`: the argument reduced by π/2 in three parts (Cody–Waite), then the Cephes
-  single-precision minimax polynomials on [−π/4, π/4]: about 0.5 ns per element for both.
+  single-precision minimax polynomials on [−π/4, π/4]: 0.6–0.9 ns per element for both.
   Largest error against float64 over |x| ≤ 1000 rad: 9e-8 (jnp.sin: 3e-8; float32 rounding
   is 6e-8). float64 arguments use jnp.sin and jnp.cos.
-- `power`: exp(exponent·log(base)) for base >= 0: about 1.1 ns per element, relative error
+- `power`: exp(exponent·log(base)) for base >= 0: about 1 ns per element, relative error
   about |exponent·ln base| float32 roundings.
 - `angle`: the argument of a complex number by the Cephes single-precision arctangent on
-  [0, tan(π/8)] after reducing the ratio of the parts to [0, 1]; jnp.angle costs 12 ns.
+  [0, tan(π/8)] after reducing the ratio of the parts to [0, 1]: 0.5 ns per element.
 """
 from __future__ import annotations
 
