@@ -4,7 +4,8 @@
 
 Each function runs 200 times in a compiled loop over a float32 (complex64 for the angle)
 array of `--elements` values, its output fed back into its input; the best of 5 calls gives
-nanoseconds per element, beside a multiply and `jnp.exp`, which XLA vectorises.
+nanoseconds per element, beside a multiply, complex arithmetic and `jnp.exp`, which XLA
+vectorises.
 """
 from __future__ import annotations
 
@@ -23,6 +24,8 @@ EXPONENT = 2.7  # an ACMTBLU1-like running-curve exponent
 # name: (function of a float32 array x in about [0.5, 1.5], returning an array like x)
 FUNCTIONS = {
     "multiply": lambda x: x * 1.0001,
+    "complex multiply": lambda x: jnp.real((x + 0.5j) * (0.9 + 0.1j)) + 0.05,
+    "complex divide": lambda x: jnp.real((x + 0.5j) / (1.1 + 0.1j * x)) + 0.05,
     "jnp.exp": lambda x: 0.5 + jnp.exp(-x),
     "jnp.sin + jnp.cos": lambda x: 1.0 + 0.1 * (jnp.sin(x) + jnp.cos(x)),
     "vecmath.sincos": lambda x: 1.0 + 0.1 * sum(vecmath.sincos(x)),

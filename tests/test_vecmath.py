@@ -4,11 +4,14 @@ Tolerances: float32 rounds to a relative 6e-8; the functions are allowed a few r
 (the module docstring gives their measured errors), and jnp's own float32 functions are
 held to the same bounds in the same test, so the bound is not looser than XLA's.
 """
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from experiments import bench_vecmath
 from jaxgrid import vecmath
 
 
@@ -65,3 +68,11 @@ def test_float64_uses_jnp():
         sin, cos = vecmath.sincos(x)
         np.testing.assert_array_equal(sin, jnp.sin(x))
         np.testing.assert_array_equal(vecmath.angle(x + 1j * x), jnp.angle(x + 1j * x))
+
+
+def test_bench_vecmath_times_every_function(tmp_path):
+    out = tmp_path / "vecmath.json"
+    bench_vecmath.main(["--elements", "64", "--out", str(out)])
+    timings = json.loads(out.read_text())["ns_per_element"]
+    assert set(timings) == set(bench_vecmath.FUNCTIONS)
+    assert all(ns > 0 for ns in timings.values())
