@@ -138,8 +138,8 @@ def fig7(runs: Runs, path) -> dict:
             runs.settings.processes)
         workers.append(runs.settings.processes)
     if runs.settings.gpu_timing:
-        label, s = runs.gpu_seconds()
-        seconds[label] = s
+        label, row = runs.gpu_row()
+        seconds[label] = row["s_per_iteration"]
         workers.append(1)
     base = seconds[f"1 {devices[0].platform} device(s)"]
     fig, ax = plt.subplots(figsize=(6, 4))

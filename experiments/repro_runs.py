@@ -246,9 +246,10 @@ class Runs:
             times.append(time.perf_counter() - start)
         return float(np.median(times))
 
-    def gpu_seconds(self) -> tuple[str, float]:
-        """(label, s per iteration) of this study's LSTM iteration with N = directions on one
-        device, read from the `settings.gpu_timing` benchmark JSON (best of its warm calls)."""
+    def gpu_row(self) -> tuple[str, dict]:
+        """(label, run row) of this study's LSTM iteration with N = directions on one device,
+        from the `settings.gpu_timing` benchmark JSON; the row's `s_per_iteration` is the
+        best of its warm calls."""
         path = Path(self.settings.gpu_timing)
         report = json.loads(path.read_text())
         rows = [r for case in report["cases"] if case["case"] == self.study.name
@@ -258,7 +259,7 @@ class Runs:
             raise ValueError(f"{path}: no GPU row for study {self.study.name!r} with N = "
                              f"{self.settings.directions} on 1 device (backend "
                              f"{report.get('backend')!r})")
-        return f"1 {report['device_kind']} ({path.name})", rows[0]["s_per_iteration"]
+        return f"1 {report['device_kind']} ({path.name})", rows[0]
 
     def process_seconds(self, processes: int) -> float:
         """Median seconds per iteration of the same training as `iteration_seconds` run as

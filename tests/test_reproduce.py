@@ -66,20 +66,23 @@ def test_a_second_run_reuses_the_finished_runs(quick):
 
 
 def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(quick, tmp_path):
-    """Which row of a benchmark file fig7 takes (this study, N = directions, one device);
-    the file's figures are placeholders: no speed is measured or judged here."""
-    wanted = {"directions": QUICK.directions, "devices": 1, "s_per_iteration": 1.0}
-    others = [{**wanted, "directions": 64, "s_per_iteration": 2.0},
-              {**wanted, "devices": 2, "s_per_iteration": 3.0}]
+    """Which row of a benchmark file fig7 takes (this study, N = directions, one device).
+    The rows carry no timing: no speed is measured or judged here."""
+    wanted = {"directions": QUICK.directions, "devices": 1, "row": "wanted"}
+    others = [{**wanted, "directions": 64, "row": "other N"},
+              {**wanted, "devices": 2, "row": "2 devices"}]
     bench = {"backend": "gpu", "device_kind": "Example GPU",
-             "cases": [{"case": "ieee39_fidvr", "runs": [*others, wanted]}]}
+             "cases": [{"case": "ieee300_fidvr", "runs": [{**wanted, "row": "other study"}]},
+                       {"case": "ieee39_fidvr", "runs": [*others, wanted]}]}
     path = tmp_path / "train.json"
     path.write_text(json.dumps(bench))
     runs = Runs("ieee39_fidvr", quick, dataclasses.replace(QUICK, gpu_timing=str(path)))
-    assert runs.gpu_seconds() == ("1 Example GPU (train.json)", wanted["s_per_iteration"])
+    label, row = runs.gpu_row()
+    assert label == "1 Example GPU (train.json)"
+    assert row["row"] == "wanted"
     path.write_text(json.dumps({**bench, "backend": "cpu"}))
     with pytest.raises(ValueError, match="no GPU row for study 'ieee39_fidvr' with N = 2"):
-        runs.gpu_seconds()
+        runs.gpu_row()
 
 
 def test_unknown_experiments_are_named(tmp_path, capsys):
