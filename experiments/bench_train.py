@@ -46,15 +46,15 @@ def bench_case(case: str, device_counts, repeats: int, task_batch: int | None = 
     defaults = DEFAULTS.get(case, PLAIN)
     study = load_study(case)
     hidden = tuple(int(h) for h in defaults["hidden"].split(","))
+    task_batch = task_batch or defaults["task_batch"]
     result = {"case": case, "policy": defaults["policy"], "hidden": list(hidden),
-              "tasks_per_iteration": TASKS_PER_ITERATION,
-              "task_batch": task_batch or defaults["task_batch"], "runs": []}
+              "tasks_per_iteration": TASKS_PER_ITERATION, "task_batch": task_batch, "runs": []}
     for n_dir in directions:
         n_dir = n_dir or defaults["directions"]
         config = ParsConfig(directions=n_dir, top=max(1, n_dir * defaults["top"]
                                                       // defaults["directions"]),
                             decay=defaults["decay"], tasks_per_iteration=TASKS_PER_ITERATION,
-                            task_batch=task_batch or defaults["task_batch"])
+                            task_batch=task_batch)
         rollouts = 2 * config.directions * config.tasks_per_iteration
         for n_dev in device_counts:
             mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
