@@ -4,13 +4,15 @@ One jit-compiled function does a whole iteration:
   1. sample N directions δ ~ N(0, I) over the flat policy vector θ;
   2. build the 2N vectors θ ± ν·δ and pick m tasks (the same for every direction and sign,
      so r+ − r− measures the perturbation alone), uniformly or by a given sampler;
-  3. roll out all 2N·m (θ, task) pairs as a vmap over the m tasks of a vmap over the 2N
-     vectors (sharded over a 1-D device mesh, `jax.sharding`): a task's data (its grid model)
-     is shared by its 2N rollouts and each vector by its m rollouts, so the policy runs as
-     2N batched products over the tasks; observations normalised by the frozen running
-     stats. (This nesting measured 1.1× faster than one flat vmap on the 39-bus study, and
-     1.8× faster than the directions outermost.) With `task_batch`, the tasks run in
-     batches of that many, one batch after another;
+  3. roll out all 2N·m (θ, task) pairs as a vmap over the 2N vectors (sharded over a 1-D
+     device mesh, `jax.sharding`) of a vmap over the m tasks: a task's data (its grid
+     model) is shared by its 2N rollouts and each vector by its m rollouts, so the policy
+     runs as 2N batched products over the tasks; observations normalised by the frozen
+     running stats. Both vmaps are `jaxgrid.batching.vmap_minor` (a generic vmap, nothing
+     grid-specific), which keeps the batch as every array's last axis: the 2N vectors the
+     minor one, so XLA:CPU's loops run over them (2.9× faster than `jax.vmap` with the tasks
+     outermost on the 39-bus study). With `task_batch`, the tasks run in batches of that
+     many, one batch after another;
   4. average the returns per ± direction, keep the top b directions by max(r+, r−);
   5. θ += α / (b·σ_b) Σ_top (r+ − r−)·δ, σ_b the std of the 2b selected returns (1 if 0);
   6. α ← ε·α, ν ← ε·ν; merge the observation statistics of every rollout.
@@ -32,6 +34,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ars import normalizer
 from ars.normalizer import RunningStats
 from ars.policies import Policy
+from jaxgrid.batching import vmap_minor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,6 +153,21 @@ def clean_returns(returns):
     return jnp.where(finite, returns, floor)
 
 
+def _in_batches(run, tasks, size: int):
+    """run(batch of c tasks) -> (2N, c, ...) results, over the m tasks (leading axis) in
+    batches of `size`, one after another; returns (2N, m, ...)."""
+    m = int(jax.tree.leaves(tasks)[0].shape[0])
+    n_full = m // size
+    head = jax.tree.map(lambda a: a[:n_full * size].reshape((n_full, size) + a.shape[1:]), tasks)
+    out = jax.lax.map(run, head)  # (n_full, 2N, size, ...)
+    out = jax.tree.map(lambda a: jnp.moveaxis(a, 0, 1).reshape(
+        (a.shape[1], n_full * size) + a.shape[3:]), out)
+    if n_full * size < m:
+        tail = run(jax.tree.map(lambda a: a[n_full * size:], tasks))
+        out = jax.tree.map(lambda a, b: jnp.concatenate([a, b], axis=1), out, tail)
+    return out
+
+
 def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
                    mesh: Mesh | None = None, seeds: int | None = None):
     """`iteration(state, tasks, data) -> (state, metrics)`, jit-compiled (`iteration.compiled`).
@@ -184,12 +202,13 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
         picked = jax.tree.map(lambda a: a[chosen], tasks)
         mean, std = state.stats.mean, state.stats.std
 
-        def per_task(task):
-            return jax.vmap(lambda theta: episode(apply, (theta, mean, std), task, carry0, data))(
-                thetas)
+        def per_batch(batch):  # (c, ...) tasks -> (2N, c, ...) episode results
+            return vmap_minor(lambda theta: vmap_minor(
+                lambda task: episode(apply, (theta, mean, std), task, carry0, data))(batch))(
+                    thetas)
 
-        out = jax.lax.map(per_task, picked, batch_size=config.task_batch or m)  # (m, 2N, ...)
-        returns = clean_returns(out["reward"].mean(axis=0))
+        out = _in_batches(per_batch, picked, config.task_batch or m)  # (2N, m, ...)
+        returns = clean_returns(out["reward"].mean(axis=1))
         r_plus, r_minus = returns[:n_dir], returns[n_dir:]
         theta, _ = ars_update(state.theta, delta, r_plus, r_minus, config.top, state.step_size)
         _, (count, total, total_sq) = out["policy_carry"]

@@ -5,8 +5,9 @@
 
 For a batch of the study's training tasks at its first operating point, during the fault,
 on one CPU device:
-- kernels: the top-level instructions of the compiled, batched Heun step (what the CPU
-  runs one after another), by kind, how many of its fusions hold complex numbers,
+- kernels: the top-level instructions of the compiled, batched Heun step, with the batch as
+  every array's last axis as the simulator holds it (`jaxgrid.batching.batch_last`), i.e.
+  what the CPU runs one after another, by kind, how many of its fusions hold complex numbers,
   transposes, gathers or scatters, and its sine, cosine, power and atan2 instructions
   (`scalar_math`: XLA:CPU evaluates them element by element, at 1.5–14 ns each, and copies
   one into every fusion that reads it; `jaxgrid.vecmath` replaces them in the step);
@@ -29,6 +30,7 @@ import numpy as np
 
 from experiments.bench_sim import _timed, write_report
 from jaxgrid import network
+from jaxgrid.batching import batch_last
 from jaxgrid.dynamics import axpy, clip_to_limits, derivatives, solve_network, update_loads
 from jaxgrid.simulate import Bounds, heun_step, within_bounds
 from jaxgrid.study import load_study
@@ -111,10 +113,12 @@ def profile_model(model, dt: float, tasks, calls: int) -> dict:
         def run(model, x, task):
             return jax.lax.fori_loop(0, STEPS_PER_CALL,
                                      lambda k, x: component(model, x, task), x)
-        return jax.jit(jax.vmap(run, in_axes=(None, 0, 0)))
+        return jax.jit(batch_last(run, in_axes=(None, -1, -1)))
 
-    args = (model, states, tasks)
-    step_text = jax.jit(jax.vmap(one_step, in_axes=(None, 0, 0))).lower(*args).compile().as_text()
+    # the batch as the simulator holds it (`jaxgrid.batching`): every array's last axis
+    args = (model, *jax.tree.map(lambda a: np.moveaxis(a, 0, -1), (states, tasks)))
+    step_text = jax.jit(batch_last(one_step, in_axes=(None, -1, -1))).lower(
+        *args).compile().as_text()
     times = {f"{key}_us": _best_us(looped(f), args, calls, batch * STEPS_PER_CALL)
              for key, f in components.items()}
     times["devices_us"] = times["rhs_us"] - times["solve_us"]

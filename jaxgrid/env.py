@@ -33,6 +33,7 @@ import numpy as np
 from flax import struct
 
 from jaxgrid import network
+from jaxgrid.batching import vmap_minor
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
 from jaxgrid.simulate import Bounds, Health, Task, advance, clip_closed, healthy, observe, shed
@@ -354,5 +355,5 @@ class LoadSheddingEnv:
         """`episode` vmapped over a batch of tasks (leading axis) at one operating point
         `grid`; the policy is shared. Every entry of the returned dict gains a leading axis.
         """
-        return jax.vmap(lambda task: self.episode(policy_apply, policy_params, task, params,
-                                                  grid, policy_carry, trace))(tasks)
+        return vmap_minor(lambda task: self.episode(policy_apply, policy_params, task, params,
+                                                    grid, policy_carry, trace))(tasks)

@@ -22,6 +22,7 @@ import numpy as np
 from flax import struct
 
 from jaxgrid import network
+from jaxgrid.batching import vmap_minor
 from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, machine_state, solve_network,
                               update_loads)
 from jaxgrid.grid import GridModel, GridState
@@ -312,7 +313,7 @@ def simulate_batch(model: GridModel, tasks: Task, t_end: float, dt: float = 0.00
     n = _samples(t_end, dt, decimation)
     run = partial(rollout, n_samples=n, decimation=decimation, dt=float(dt), bounds=bounds)
     with jax.enable_x64(model.precision == "float64"):
-        return jax.vmap(run, in_axes=(None, 0))(model, tasks) if batched else run(model, tasks)
+        return vmap_minor(run, in_axes=(None, 0))(model, tasks) if batched else run(model, tasks)
 
 
 # --------------------------------------------------------------------------- #

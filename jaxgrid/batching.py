@@ -1,0 +1,454 @@
+"""`vmap_minor`: `jax.vmap` with the batch as the minor (last) axis of every array inside.
+
+Why: `jax.vmap` puts the batch axis first. XLA:CPU then lays a device group's arrays out as
+(batch, slot), while the network product and XLA's gathers produce (slot, batch); the fusions
+between them read transposed and compile to scalar loops over a handful of slots
+(`experiments/profile_step.py`; README "Performance"). Interpreting the per-rollout program
+with the batch kept last makes every array (slot, ..., batch): one layout, loops over the
+batch that vectorise, no transposes.
+
+How: the function is traced once per call for one example (`jax.make_jaxpr`) and its jaxpr
+evaluated with each value either unbatched or batched along a trailing axis of size B. Each
+primitive has a rule keeping the batch last (elementwise ops broadcast their unbatched
+operands, gathers and scatters take the batch as one more window dimension, loops carry it).
+A primitive without a rule falls back to `jax.vmap` of that primitive alone, moving the
+batch to the front and back (correct, only slower).
+
+Differentiating *through* a `vmap_minor`-ed function differentiates the evaluated primitives,
+so custom derivative rules inside it (`jax.custom_jvp`) are not used; differentiate inside
+it, or use `jax.vmap`, where that matters. The results equal `jax.vmap`'s up to float
+rounding (XLA may fuse in a different order; tested).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+from jax.extend import core
+
+ELEMENTWISE = frozenset("""
+abs acos acosh add and asin asinh atan atan2 atanh cbrt ceil clamp complex conj
+convert_element_type copy copy_p cos cosh div eq erf erf_inv erfc exp exp2 expm1 floor ge gt
+imag integer_pow is_finite le lgamma digamma log log1p logistic lt max min mul ne neg
+nextafter not or population_count pow real reduce_precision rem round rsqrt select_n
+shift_left shift_right_arithmetic shift_right_logical sign sin sinh sqrt square sub tan tanh
+xor optimization_barrier stop_gradient
+""".split())
+
+AXIS_PRESERVING = frozenset("""
+reduce_sum reduce_max reduce_min reduce_prod reduce_and reduce_or reduce_xor argmax argmin
+cumsum cumprod cummax cummin cumlogsumexp squeeze rev split
+""".split())
+
+
+def vmap_minor(fun: Callable, in_axes: int | None | Sequence = 0, out_axes: int = 0) -> Callable:
+    """Like `jax.vmap(fun, in_axes, out_axes)` (in_axes: 0 or None per positional argument,
+    or one for all), evaluated with the batch as every array's last axis inside: the batched
+    arguments' leading axis is moved last on entry, and the outputs' last axis to
+    `out_axes`."""
+    inner = batch_last(fun, in_axes)
+
+    def batched(*args):
+        flat, tree = jax.tree.flatten(args)
+        flags = _flags_of_args(args, in_axes)
+        minor = [jnp.moveaxis(x, 0, -1) if b else x for x, b in zip(flat, flags)]
+        out = inner(*jax.tree.unflatten(tree, minor))
+        return jax.tree.map(lambda x: jnp.moveaxis(x, -1, out_axes), out)
+
+    return batched
+
+
+def batch_last(fun: Callable, in_axes: int | None | Sequence = -1) -> Callable:
+    """`fun` (written for one example) over a batch held as the LAST axis of every batched
+    argument (in_axes: -1 or None per positional argument, or one for all); every output
+    gets the batch as its last axis. `vmap_minor` without the moves on entry and exit."""
+
+    def batched(*args):
+        flat, tree = jax.tree.flatten(args)
+        flags = _flags_of_args(args, in_axes)
+        sizes = {np.shape(x)[-1] for x, b in zip(flat, flags) if b}
+        if len(sizes) != 1:
+            raise ValueError(f"vmap_minor: the batched arguments need one batch size, got "
+                             f"{sorted(sizes)}")
+        size = sizes.pop()
+        example = [jax.ShapeDtypeStruct(np.shape(x)[:-1], jnp.result_type(x)) if b else x
+                   for x, b in zip(flat, flags)]
+        closed, out_shape = jax.make_jaxpr(
+            lambda *leaves: fun(*jax.tree.unflatten(tree, leaves)), return_shape=True)(*example)
+        outs = evaluate(closed.jaxpr, closed.consts, flat, flags, size)
+        return jax.tree.unflatten(jax.tree.structure(out_shape),
+                                  [_batched(x, b, size) for x, b in outs])
+
+    return batched
+
+
+def _flags_of_args(args, in_axes) -> list:
+    """Per leaf of `args`: batched (in_axes entry not None)."""
+    axes = in_axes if isinstance(in_axes, (list, tuple)) else (in_axes,) * len(args)
+    if len(axes) != len(args):
+        raise ValueError(f"vmap_minor: in_axes has {len(axes)} entries for {len(args)} "
+                         "arguments")
+    return jax.tree.leaves(tuple(jax.tree.map(lambda _, a=a: a is not None, arg)
+                                 for arg, a in zip(args, axes)))
+
+
+def evaluate(jaxpr, consts, args, flags, size: int):
+    """Values of `jaxpr`'s outputs as (value, batched) pairs; batched values carry the batch
+    as their last axis (size `size`)."""
+    env = {}
+
+    def read(v):
+        return (v.val, False) if isinstance(v, core.Literal) else env[v]
+
+    for var, val in zip(jaxpr.constvars, consts):
+        env[var] = (val, False)
+    for var, val, flag in zip(jaxpr.invars, args, flags):
+        env[var] = (val, flag)
+    for eqn in jaxpr.eqns:
+        vals, batched = zip(*map(read, eqn.invars)) if eqn.invars else ((), ())
+        if not any(batched):
+            out = eqn.primitive.bind(*vals, **eqn.primitive.get_bind_params(eqn.params))
+            outs = [(o, False) for o in (out if eqn.primitive.multiple_results else [out])]
+        else:
+            outs = _apply(eqn, list(vals), list(batched), size)
+        for var, pair in zip(eqn.outvars, outs):
+            env[var] = pair
+    return [read(v) for v in jaxpr.outvars]
+
+
+def _batched(x, flag: bool, size: int):
+    """x with a trailing batch axis, broadcast if it has none."""
+    if flag:
+        return x
+    x = jnp.asarray(x)
+    return lax.broadcast_in_dim(x, x.shape + (size,), tuple(range(x.ndim)))
+
+
+def _apply(eqn, vals, batched, size):
+    name, params = eqn.primitive.name, dict(eqn.params)
+    rule = _RULES.get(name)
+    if rule is not None:
+        return rule(eqn, vals, batched, size, **params)
+    if name in ELEMENTWISE:
+        return _elementwise(eqn, vals, batched, size, **params)
+    if name in AXIS_PRESERVING:
+        out = eqn.primitive.bind(*vals, **params)
+        return [(o, True) for o in out] if eqn.primitive.multiple_results else [(out, True)]
+    return _fallback(eqn, vals, batched, size)
+
+
+def _fallback(eqn, vals, batched, size):
+    """`jax.vmap` of the one primitive, with the batch moved to the front and back."""
+    FALLBACKS[eqn.primitive.name] = FALLBACKS.get(eqn.primitive.name, 0) + 1
+    params = eqn.primitive.get_bind_params(eqn.params)
+    front = [jnp.moveaxis(v, -1, 0) if b else v for v, b in zip(vals, batched)]
+    out = jax.vmap(lambda *a: eqn.primitive.bind(*a, **params),
+                   in_axes=[0 if b else None for b in batched])(*front)
+    outs = out if eqn.primitive.multiple_results else [out]
+    return [(jnp.moveaxis(o, 0, -1), True) for o in outs]
+
+
+def _elementwise(eqn, vals, batched, size, **params):
+    """Every operand broadcast to the output's per-example shape (numpy rules: lax's binary
+    ops broadcast size-1 axes) with the batch last."""
+    shapes = [np.shape(v)[:np.ndim(v) - b] for v, b in zip(vals, batched)]
+    shape = tuple(np.broadcast_shapes(*shapes))
+    full = shape + (size,)
+
+    def conform(v, b, own):
+        if b and own == shape:
+            return v
+        dims = tuple(range(len(shape) - len(own), len(shape)))
+        return lax.broadcast_in_dim(v, full, dims + ((len(shape),) if b else ()))
+
+    out = eqn.primitive.bind(*[conform(v, b, s) for v, b, s in zip(vals, batched, shapes)],
+                             **params)
+    return [(o, True) for o in out] if eqn.primitive.multiple_results else [(out, True)]
+
+
+def _broadcast_in_dim(eqn, vals, batched, size, shape, broadcast_dimensions, sharding):
+    operand, *dynamic = vals
+    if any(batched[1:]):
+        return _fallback(eqn, vals, batched, size)
+    return [(lax.broadcast_in_dim(operand, tuple(shape) + (size,),
+                                  tuple(broadcast_dimensions) + (len(shape),)), True)]
+
+
+def _reshape(eqn, vals, batched, size, new_sizes, dimensions, sharding):
+    if dimensions is not None or len(vals) > 1:
+        return _fallback(eqn, vals, batched, size)
+    return [(jnp.reshape(vals[0], tuple(new_sizes) + (size,)), True)]
+
+
+def _transpose(eqn, vals, batched, size, permutation):
+    return [(lax.transpose(vals[0], tuple(permutation) + (len(permutation),)), True)]
+
+
+def _slice(eqn, vals, batched, size, start_indices, limit_indices, strides):
+    strides = None if strides is None else tuple(strides) + (1,)
+    return [(lax.slice(vals[0], tuple(start_indices) + (0,), tuple(limit_indices) + (size,),
+                       strides), True)]
+
+
+def _dynamic_slice(eqn, vals, batched, size, slice_sizes):
+    operand, *starts = vals
+    if any(batched[1:]) and not batched[0]:
+        # per-example starts into a shared operand: a gather whose batch axis is last
+        rank = np.ndim(operand)
+        index = jnp.stack([_batched(i, b, size) for i, b in zip(starts, batched[1:])], axis=1)
+        dn = lax.GatherDimensionNumbers(offset_dims=tuple(range(rank)), collapsed_slice_dims=(),
+                                        start_index_map=tuple(range(rank)))
+        return [(lax.gather(operand, index, dn, tuple(slice_sizes),
+                            mode=lax.GatherScatterMode.CLIP), True)]
+    if any(batched[1:]):
+        return _fallback(eqn, vals, batched, size)
+    zero = jnp.zeros((), jnp.result_type(starts[0]) if starts else jnp.int32)
+    return [(lax.dynamic_slice(operand, list(starts) + [zero], tuple(slice_sizes) + (size,)),
+             True)]
+
+
+def _dynamic_update_slice(eqn, vals, batched, size):
+    operand, update, *starts = vals
+    if any(batched[2:]):
+        return _fallback(eqn, vals, batched, size)
+    zero = jnp.zeros((), jnp.result_type(starts[0]) if starts else jnp.int32)
+    return [(lax.dynamic_update_slice(_batched(operand, batched[0], size),
+                                      _batched(update, batched[1], size),
+                                      list(starts) + [zero]), True)]
+
+
+def _concatenate(eqn, vals, batched, size, dimension):
+    return [(lax.concatenate([_batched(v, b, size) for v, b in zip(vals, batched)],
+                             dimension), True)]
+
+
+def _pad(eqn, vals, batched, size, padding_config):
+    operand, value = vals
+    if batched[1]:
+        return _fallback(eqn, vals, batched, size)
+    return [(lax.pad(operand, value, tuple(padding_config) + ((0, 0, 0),)), True)]
+
+
+def _gather(eqn, vals, batched, size, dimension_numbers, slice_sizes, **params):
+    operand, indices = vals
+    if batched[1]:
+        return _fallback(eqn, vals, batched, size)
+    dn = dimension_numbers
+    out_rank = len(eqn.outvars[0].aval.shape)
+    dn = dn._replace(offset_dims=tuple(dn.offset_dims) + (out_rank,))
+    return [(lax.gather_p.bind(operand, indices, dimension_numbers=dn,
+                               slice_sizes=tuple(slice_sizes) + (size,), **params), True)]
+
+
+def _scatter(eqn, vals, batched, size, dimension_numbers, **params):
+    operand, indices, updates = vals
+    if batched[1]:
+        return _fallback(eqn, vals, batched, size)
+    dn = dimension_numbers
+    updates_rank = len(eqn.invars[2].aval.shape)
+    dn = dn._replace(update_window_dims=tuple(dn.update_window_dims) + (updates_rank,))
+    return [(eqn.primitive.bind(_batched(operand, batched[0], size), indices,
+                                _batched(updates, batched[2], size), dimension_numbers=dn,
+                                **params), True)]
+
+
+def _dot_general(eqn, vals, batched, size, dimension_numbers, **params):
+    (lc, rc), (lb, rb) = dimension_numbers
+    lhs, rhs = vals
+    out_ndim = len(eqn.outvars[0].aval.shape)
+    if batched[0] and batched[1]:
+        nl, nr = np.ndim(lhs) - 1, np.ndim(rhs) - 1
+        if not lb and len(lc) == nl and len(rc) == nr:  # an inner product: no transposes
+            aligned = lax.transpose(rhs, tuple(rc[list(lc).index(i)] for i in range(nl)) + (nr,))
+            out = jnp.sum(lhs * aligned, axis=tuple(range(nl)))
+            dtype = params.get("preferred_element_type")
+            return [(out if dtype is None else out.astype(dtype), True)]
+        out = lax.dot_general_p.bind(lhs, rhs, dimension_numbers=(
+            (lc, rc), (tuple(lb) + (nl,), tuple(rb) + (nr,))), **params)
+        return [(jnp.moveaxis(out, len(lb), -1), True)]
+    out = lax.dot_general_p.bind(lhs, rhs, dimension_numbers=dimension_numbers, **params)
+    if batched[1]:  # the batch is rhs's last free axis: the output's last
+        return [(out, True)]
+    # lhs's last free axis: after lhs's free axes, before rhs's
+    rhs_free = np.ndim(rhs) - len(rc) - len(rb)
+    return [(jnp.moveaxis(out, out_ndim - rhs_free, -1), True)]
+
+
+def _call(eqn, vals, batched, size, **params):
+    """pjit, closed_call, remat, custom_jvp_call, custom_vjp_call: evaluate the body."""
+    closed = _body(params)
+    return evaluate(closed.jaxpr, closed.consts, vals, batched, size)
+
+
+def out_flags(jaxpr, flags) -> list:
+    """Which outputs of `jaxpr` are batched for inputs batched as `flags`: any batched input
+    batches every output, except through calls and loops, which are followed inside."""
+    env = dict(zip(jaxpr.invars, flags))
+    read = lambda v: False if isinstance(v, core.Literal) else env.get(v, False)  # noqa: E731
+    for eqn in jaxpr.eqns:
+        ins = [read(v) for v in eqn.invars]
+        name = eqn.primitive.name
+        if not any(ins):
+            outs = [False] * len(eqn.outvars)
+        elif name in _CALLS:
+            outs = out_flags(_body(eqn.params).jaxpr, ins)
+        elif name == "while":
+            outs, _ = _while_flags(eqn.params, ins)
+        elif name == "scan":
+            carry, ys = _scan_flags(eqn.params, ins)
+            outs = carry + ys
+        elif name == "cond":
+            outs = _cond_flags(eqn.params, ins)
+        else:
+            outs = [True] * len(eqn.outvars)
+        env.update(zip(eqn.outvars, outs))
+    return [read(v) for v in jaxpr.outvars]
+
+
+def _body(params):
+    closed = next(params[k] for k in ("jaxpr", "call_jaxpr", "fun_jaxpr") if k in params)
+    return closed if hasattr(closed, "consts") else core.ClosedJaxpr(closed, ())
+
+
+def _fixpoint(body, before, carry, after=()):
+    """Carry flags of a loop whose body takes (before, carry, after): a carry is batched once
+    the body batches it."""
+    carry = list(carry)
+    while True:
+        outs = out_flags(body.jaxpr, list(before) + carry + list(after))
+        new = [c or o for c, o in zip(carry, outs)]
+        if new == carry:
+            return carry
+        carry = new
+
+
+def _while_flags(params, flags):
+    """(carry flags, whether the stopping test is batched); a batched test batches every
+    carry (each example keeps its own once its loop has ended)."""
+    nc, nb = params["cond_nconsts"], params["body_nconsts"]
+    cond_c, body_c, init = flags[:nc], flags[nc:nc + nb], flags[nc + nb:]
+    carry = _fixpoint(params["body_jaxpr"], body_c, init)
+    pred = out_flags(params["cond_jaxpr"].jaxpr, list(cond_c) + carry)[0]
+    return ([True] * len(carry) if pred else carry), pred
+
+
+def _scan_flags(params, flags):
+    """(carry flags, stacked-output flags) of a scan."""
+    nc, nk = params["num_consts"], params["num_carry"]
+    consts, init, xs = flags[:nc], flags[nc:nc + nk], flags[nc + nk:]
+    carry = _fixpoint(params["jaxpr"], consts, init, xs)
+    return carry, out_flags(params["jaxpr"].jaxpr, list(consts) + carry + list(xs))[nk:]
+
+
+def _cond_flags(params, flags):
+    index, ops = flags[0], flags[1:]
+    outs = [any(f) for f in zip(*(out_flags(b.jaxpr, ops) for b in params["branches"]))]
+    return [o or index for o in outs]
+
+
+def _evaluate_closed(closed, vals, flags, size, want):
+    """Evaluate a closed jaxpr, then broadcast outputs to the `want` flags."""
+    pairs = evaluate(closed.jaxpr, closed.consts, vals, flags, size)
+    return [_batched(x, b, size) if w else x for (x, b), w in zip(pairs, want)]
+
+
+def _while(eqn, vals, batched, size, cond_nconsts, cond_jaxpr, body_nconsts, body_jaxpr):
+    carry_flags, pred_batched = _while_flags(eqn.params, batched)
+    nc, nb = cond_nconsts, body_nconsts
+    cond_c, body_c, init = vals[:nc], vals[nc:nc + nb], vals[nc + nb:]
+    cond_f, body_f = batched[:nc], batched[nc:nc + nb]
+    init = [_batched(v, b, size) if f else v
+            for v, f, b in zip(init, carry_flags, batched[nc + nb:])]
+
+    def predicate(carry):
+        (p, _), = evaluate(cond_jaxpr.jaxpr, cond_jaxpr.consts, list(cond_c) + list(carry),
+                           list(cond_f) + carry_flags, size)
+        return p
+
+    def cond_fun(carry):
+        p = predicate(carry)
+        return jnp.any(p) if pred_batched else p
+
+    def body_fun(carry):
+        new = _evaluate_closed(body_jaxpr, list(body_c) + list(carry),
+                               list(body_f) + carry_flags, size, carry_flags)
+        if pred_batched:  # examples whose loop has ended keep their carry
+            live = predicate(carry)
+            new = [jnp.where(jnp.reshape(live, (1,) * (jnp.ndim(n) - 1) + (size,)), n, c)
+                   for n, c in zip(new, carry)]
+        return new
+
+    out = lax.while_loop(cond_fun, body_fun, list(init))
+    return list(zip(out, carry_flags))
+
+
+def _scan(eqn, vals, batched, size, reverse, length, jaxpr, num_consts, num_carry, unroll,
+          **_):
+    carry_flags, ys_flags = _scan_flags(eqn.params, batched)
+    consts, init, xs = (vals[:num_consts], vals[num_consts:num_consts + num_carry],
+                        vals[num_consts + num_carry:])
+    c_f, x_f = batched[:num_consts], batched[num_consts + num_carry:]
+    init = [_batched(v, b, size) if f else v
+            for v, f, b in zip(init, carry_flags, batched[num_consts:num_consts + num_carry])]
+
+    def body(carry, x):
+        outs = _evaluate_closed(jaxpr, list(consts) + list(carry) + list(x),
+                                list(c_f) + carry_flags + list(x_f), size,
+                                carry_flags + ys_flags)
+        return outs[:num_carry], outs[num_carry:]
+
+    carry, ys = lax.scan(body, list(init), list(xs), length=length, reverse=reverse,
+                         unroll=unroll)
+    return list(zip(carry, carry_flags)) + list(zip(ys, ys_flags))
+
+
+def _cond(eqn, vals, batched, size, branches, **_):
+    index, ops = vals[0], vals[1:]
+    flags = _cond_flags(eqn.params, batched)
+    run = [lambda *o, b=b: _evaluate_closed(b, list(o), batched[1:], size, flags)
+           for b in branches]
+    if not batched[0]:
+        return list(zip(lax.switch(index, run, *ops), flags))
+    results = [r(*ops) for r in run]  # a batched index: every branch, then a selection
+    return [(lax.select_n(lax.broadcast_in_dim(index, jnp.shape(outs[0]),
+                                               (jnp.ndim(outs[0]) - 1,)), *outs), True)
+            for outs in zip(*results)]
+
+
+FALLBACKS: dict = {}
+
+_RULES = {
+    "broadcast_in_dim": _broadcast_in_dim,
+    "reshape": _reshape,
+    "transpose": _transpose,
+    "slice": _slice,
+    "dynamic_slice": _dynamic_slice,
+    "dynamic_update_slice": _dynamic_update_slice,
+    "concatenate": _concatenate,
+    "pad": _pad,
+    "gather": _gather,
+    "scatter": _scatter,
+    "scatter-add": _scatter,
+    "scatter_add": _scatter,
+    "dot_general": _dot_general,
+    "pjit": _call,
+    "jit": _call,
+    "closed_call": _call,
+    "core_call": _call,
+    "remat": _call,
+    "checkpoint": _call,
+    "custom_jvp_call": _call,
+    "custom_vjp_call": _call,
+    "custom_vjp_call_jaxpr": _call,
+    "while": _while,
+    "scan": _scan,
+    "cond": _cond,
+    "tile": lambda eqn, vals, batched, size, reps: [
+        (eqn.primitive.bind(vals[0], reps=tuple(reps) + (1,)), True)],
+    "stack": lambda eqn, vals, batched, size, axis: [
+        (jnp.stack([_batched(v, b, size) for v, b in zip(vals, batched)], axis), True)],
+}
+_CALLS = frozenset(k for k, v in _RULES.items() if v is _call)
