@@ -38,43 +38,51 @@ shift_left shift_right_arithmetic shift_right_logical sign sin sinh sqrt square 
 xor optimization_barrier stop_gradient
 """.split())
 
+FIRST = "first"  # the flag of a value kept batch-first (`vmap_minor`'s `first`)
+
 AXIS_PRESERVING = frozenset("""
 reduce_sum reduce_max reduce_min reduce_prod reduce_and reduce_or reduce_xor argmax argmin
 cumsum cumprod cummax cummin cumlogsumexp squeeze rev split
 """.split())
 
 
-def vmap_minor(fun: Callable, in_axes: int | None | Sequence = 0, out_axes: int = 0) -> Callable:
+def vmap_minor(fun: Callable, in_axes: int | None | Sequence = 0, out_axes: int = 0,
+               first: bool | Sequence[bool] = False) -> Callable:
     """Like `jax.vmap(fun, in_axes, out_axes)` (in_axes: 0 or None per positional argument,
     or one for all), evaluated with the batch as every array's last axis inside: the batched
     arguments' leading axis is moved last on entry, and the outputs' last axis to
-    `out_axes`."""
-    inner = batch_last(fun, in_axes)
+    `out_axes`. Arguments marked in `first` (per positional argument, or one for all) stay
+    batch-first for the `batch_major` functions that read them (e.g. per-example policy
+    weights), and are moved where anything else reads them."""
+    inner = batch_last(fun, in_axes, first)
 
     def batched(*args):
         flat, tree = jax.tree.flatten(args)
-        flags = _flags_of_args(args, in_axes)
-        minor = [jnp.moveaxis(x, 0, -1) if b else x for x, b in zip(flat, flags)]
+        flags = _flags_of_args(args, in_axes, first)
+        minor = [jnp.moveaxis(x, 0, -1) if b is True else x for x, b in zip(flat, flags)]
         out = inner(*jax.tree.unflatten(tree, minor))
         return jax.tree.map(lambda x: jnp.moveaxis(x, -1, out_axes), out)
 
     return batched
 
 
-def batch_last(fun: Callable, in_axes: int | None | Sequence = -1) -> Callable:
+def batch_last(fun: Callable, in_axes: int | None | Sequence = -1,
+               first: bool | Sequence[bool] = False) -> Callable:
     """`fun` (written for one example) over a batch held as the LAST axis of every batched
-    argument (in_axes: -1 or None per positional argument, or one for all); every output
-    gets the batch as its last axis. `vmap_minor` without the moves on entry and exit."""
+    argument (in_axes: -1 or None per positional argument, or one for all; the first axis
+    for arguments marked in `first`); every output gets the batch as its last axis.
+    `vmap_minor` without the moves on entry and exit."""
 
     def batched(*args):
         flat, tree = jax.tree.flatten(args)
-        flags = _flags_of_args(args, in_axes)
-        sizes = {np.shape(x)[-1] for x, b in zip(flat, flags) if b}
+        flags = _flags_of_args(args, in_axes, first)
+        sizes = {np.shape(x)[0 if b is FIRST else -1] for x, b in zip(flat, flags) if b}
         if len(sizes) != 1:
             raise ValueError(f"vmap_minor: the batched arguments need one batch size, got "
                              f"{sorted(sizes)}")
         size = sizes.pop()
-        example = [jax.ShapeDtypeStruct(np.shape(x)[:-1], jnp.result_type(x)) if b else x
+        example = [jax.ShapeDtypeStruct(np.shape(x)[1:] if b is FIRST else np.shape(x)[:-1],
+                                        jnp.result_type(x)) if b else x
                    for x, b in zip(flat, flags)]
         closed, out_shape = jax.make_jaxpr(
             lambda *leaves: fun(*jax.tree.unflatten(tree, leaves)), return_shape=True)(*example)
@@ -85,14 +93,16 @@ def batch_last(fun: Callable, in_axes: int | None | Sequence = -1) -> Callable:
     return batched
 
 
-def _flags_of_args(args, in_axes) -> list:
-    """Per leaf of `args`: batched (in_axes entry not None)."""
+def _flags_of_args(args, in_axes, first) -> list:
+    """Per leaf of `args`: False (not batched), True (batched) or FIRST (kept batch-first)."""
     axes = in_axes if isinstance(in_axes, (list, tuple)) else (in_axes,) * len(args)
-    if len(axes) != len(args):
-        raise ValueError(f"vmap_minor: in_axes has {len(axes)} entries for {len(args)} "
-                         "arguments")
-    return jax.tree.leaves(tuple(jax.tree.map(lambda _, a=a: a is not None, arg)
-                                 for arg, a in zip(args, axes)))
+    firsts = first if isinstance(first, (list, tuple)) else (first,) * len(args)
+    if len(axes) != len(args) or len(firsts) != len(args):
+        raise ValueError(f"vmap_minor: in_axes has {len(axes)} and first {len(firsts)} "
+                         f"entries for {len(args)} arguments")
+    return jax.tree.leaves(tuple(
+        jax.tree.map(lambda _, a=a, f=f: (FIRST if f else True) if a is not None else False,
+                     arg) for arg, a, f in zip(args, axes, firsts)))
 
 
 def evaluate(jaxpr, consts, args, flags, size: int):
@@ -113,14 +123,23 @@ def evaluate(jaxpr, consts, args, flags, size: int):
             out = eqn.primitive.bind(*vals, **eqn.primitive.get_bind_params(eqn.params))
             outs = [(o, False) for o in (out if eqn.primitive.multiple_results else [out])]
         else:
+            if FIRST in batched and eqn.primitive.name not in _PASS_FIRST:
+                vals, batched = zip(*map(_to_last, vals, batched))
             outs = _apply(eqn, list(vals), list(batched), size)
         for var, pair in zip(eqn.outvars, outs):
             env[var] = pair
     return [read(v) for v in jaxpr.outvars]
 
 
-def _batched(x, flag: bool, size: int):
+def _to_last(x, flag):
+    """A `FIRST` value moved to the batch-last layout."""
+    return (jnp.moveaxis(x, 0, -1), True) if flag is FIRST else (x, flag)
+
+
+def _batched(x, flag, size: int):
     """x with a trailing batch axis, broadcast if it has none."""
+    if flag is FIRST:
+        return jnp.moveaxis(x, 0, -1)
     if flag:
         return x
     x = jnp.asarray(x)
@@ -277,9 +296,28 @@ def _dot_general(eqn, vals, batched, size, dimension_numbers, **params):
     return [(jnp.moveaxis(out, out_ndim - rhs_free, -1), True)]
 
 
+def batch_major(fun: Callable) -> Callable:
+    """`fun`, to be batched with the batch FIRST (`jax.vmap`) where `vmap_minor` meets it.
+
+    For per-example matrices (a policy's weights, one set per perturbed θ): XLA's batched
+    product wants the batch as their leading axis, so batch-last weights are transposed at
+    every call; moved to the front at the call instead, a loop-invariant θ is moved once."""
+    def batch_major_call(*args):
+        return fun(*args)
+
+    return jax.jit(batch_major_call)
+
+
 def _call(eqn, vals, batched, size, **params):
-    """pjit, closed_call, remat, custom_jvp_call, custom_vjp_call: evaluate the body."""
+    """pjit, closed_call, remat, custom_jvp_call, custom_vjp_call: evaluate the body
+    (`batch_major` functions: `jax.vmap` of it, the batch moved to the front and back)."""
     closed = _body(params)
+    if params.get("name") == "batch_major_call":
+        front = [jnp.moveaxis(v, -1, 0) if b and b is not FIRST else v
+                 for v, b in zip(vals, batched)]
+        outs = jax.vmap(batch_major(core.jaxpr_as_fun(closed)),
+                        in_axes=[0 if b else None for b in batched])(*front)
+        return [(jnp.moveaxis(o, 0, -1), True) for o in outs]
     return evaluate(closed.jaxpr, closed.consts, vals, batched, size)
 
 
@@ -305,7 +343,7 @@ def out_flags(jaxpr, flags) -> list:
         else:
             outs = [True] * len(eqn.outvars)
         env.update(zip(eqn.outvars, outs))
-    return [read(v) for v in jaxpr.outvars]
+    return [bool(read(v)) for v in jaxpr.outvars]
 
 
 def _body(params):
@@ -316,7 +354,7 @@ def _body(params):
 def _fixpoint(body, before, carry, after=()):
     """Carry flags of a loop whose body takes (before, carry, after): a carry is batched once
     the body batches it."""
-    carry = list(carry)
+    carry = [bool(c) for c in carry]
     while True:
         outs = out_flags(body.jaxpr, list(before) + carry + list(after))
         new = [c or o for c, o in zip(carry, outs)]
@@ -346,7 +384,7 @@ def _scan_flags(params, flags):
 def _cond_flags(params, flags):
     index, ops = flags[0], flags[1:]
     outs = [any(f) for f in zip(*(out_flags(b.jaxpr, ops) for b in params["branches"]))]
-    return [o or index for o in outs]
+    return [bool(o or index) for o in outs]
 
 
 def _evaluate_closed(closed, vals, flags, size, want):
@@ -393,6 +431,8 @@ def _scan(eqn, vals, batched, size, reverse, length, jaxpr, num_consts, num_carr
     c_f, x_f = batched[:num_consts], batched[num_consts + num_carry:]
     init = [_batched(v, b, size) if f else v
             for v, f, b in zip(init, carry_flags, batched[num_consts:num_consts + num_carry])]
+    xs = [_batched(v, b, size) if b else v for v, b in zip(xs, x_f)]
+    x_f = [bool(b) for b in x_f]
 
     def body(carry, x):
         outs = _evaluate_closed(jaxpr, list(consts) + list(carry) + list(x),
@@ -452,3 +492,4 @@ _RULES = {
         (jnp.stack([_batched(v, b, size) for v, b in zip(vals, batched)], axis), True)],
 }
 _CALLS = frozenset(k for k, v in _RULES.items() if v is _call)
+_PASS_FIRST = _CALLS | {"while", "scan", "cond"}  # hand FIRST values on to their bodies
