@@ -12,7 +12,12 @@ evaluated with each value either unbatched or batched along a trailing axis of s
 primitive has a rule keeping the batch last (elementwise ops broadcast their unbatched
 operands, gathers and scatters take the batch as one more window dimension, loops carry it).
 A primitive without a rule falls back to `jax.vmap` of that primitive alone, moving the
-batch to the front and back (correct, only slower).
+batch to the front and back (correct, only slower; `FALLBACKS` counts them by name).
+
+Per-example matrices are the exception: XLA's batched product wants their batch first. A
+function wrapped in `batch_major` (the policy) is batched with `jax.vmap` where it is met,
+and arguments passed with `first` (the perturbed θ) stay batch-first until something other
+than such a function reads them, so loop-invariant weights are never transposed.
 
 Differentiating *through* a `vmap_minor`-ed function differentiates the evaluated primitives,
 so custom derivative rules inside it (`jax.custom_jvp`) are not used; differentiate inside
@@ -100,14 +105,17 @@ def _flags_of_args(args, in_axes, first) -> list:
     if len(axes) != len(args) or len(firsts) != len(args):
         raise ValueError(f"vmap_minor: in_axes has {len(axes)} and first {len(firsts)} "
                          f"entries for {len(args)} arguments")
+    if any(a not in (0, -1, None) for a in axes):
+        raise ValueError(f"vmap_minor: in_axes = {in_axes!r}: each entry must be 0 (-1 for "
+                         "batch_last) or None")
     return jax.tree.leaves(tuple(
         jax.tree.map(lambda _, a=a, f=f: (FIRST if f else True) if a is not None else False,
                      arg) for arg, a, f in zip(args, axes, firsts)))
 
 
 def evaluate(jaxpr, consts, args, flags, size: int):
-    """Values of `jaxpr`'s outputs as (value, batched) pairs; batched values carry the batch
-    as their last axis (size `size`)."""
+    """Values of `jaxpr`'s outputs as (value, flag) pairs for inputs flagged `flags`: False
+    (unbatched), True (the batch of size `size` is the last axis) or FIRST (the first)."""
     env = {}
 
     def read(v):
@@ -458,7 +466,7 @@ def _cond(eqn, vals, batched, size, branches, **_):
             for outs in zip(*results)]
 
 
-FALLBACKS: dict = {}
+FALLBACKS: dict = {}  # primitive name -> how many times it fell back to jax.vmap (tests)
 
 _RULES = {
     "broadcast_in_dim": _broadcast_in_dim,

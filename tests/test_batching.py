@@ -101,6 +101,8 @@ def test_mismatched_batch_sizes_are_named():
         vmap_minor(lambda a, b: a + b)(X, X[:, :5].T)
     with pytest.raises(ValueError, match="in_axes has 1 and first 2 entries for 2 arguments"):
         vmap_minor(lambda a, b: a + b, in_axes=(0,))(X, X)
+    with pytest.raises(ValueError, match=r"in_axes = \(1, 0\): each entry must be 0"):
+        vmap_minor(lambda a, b: a + b, in_axes=(1, 0))(X, X)
 
 
 def test_batch_major_functions_read_first_arguments_in_place():
