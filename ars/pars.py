@@ -114,7 +114,8 @@ def _init(policy: Policy, config: ParsConfig, key) -> TrainState:
 
 def normalized_policy(policy: Policy):
     """policy_apply(params, obs, carry) with params = (θ, mean, std) that normalises the
-    observation and accumulates its sums (count, Σx, Σx²) in the carry."""
+    observation and accumulates its sums (count, Σx, Σx²) in the carry. The network runs
+    `batch_major` (per-direction weights batch-first for XLA's batched product)."""
 
     def apply(params, obs, carry):
         theta, mean, std = params
