@@ -128,8 +128,8 @@ def evaluate(jaxpr, consts, args, flags, size: int):
     for eqn in jaxpr.eqns:
         vals, batched = zip(*map(read, eqn.invars)) if eqn.invars else ((), ())
         if not any(batched):
-            out = eqn.primitive.bind(*vals, **eqn.primitive.get_bind_params(eqn.params))
-            outs = [(o, False) for o in (out if eqn.primitive.multiple_results else [out])]
+            outs = _pairs(eqn, eqn.primitive.bind(
+                *vals, **eqn.primitive.get_bind_params(eqn.params)), False)
         else:
             if FIRST in batched and eqn.primitive.name not in _PASS_FIRST:
                 vals, batched = zip(*map(_to_last, vals, batched))
@@ -162,8 +162,7 @@ def _apply(eqn, vals, batched, size):
     if name in ELEMENTWISE:
         return _elementwise(eqn, vals, batched, size, **params)
     if name in AXIS_PRESERVING:
-        out = eqn.primitive.bind(*vals, **params)
-        return [(o, True) for o in out] if eqn.primitive.multiple_results else [(out, True)]
+        return _pairs(eqn, eqn.primitive.bind(*vals, **params))
     return _fallback(eqn, vals, batched, size)
 
 
@@ -171,11 +170,21 @@ def _fallback(eqn, vals, batched, size):
     """`jax.vmap` of the one primitive, with the batch moved to the front and back."""
     FALLBACKS[eqn.primitive.name] = FALLBACKS.get(eqn.primitive.name, 0) + 1
     params = eqn.primitive.get_bind_params(eqn.params)
-    front = [jnp.moveaxis(v, -1, 0) if b else v for v, b in zip(vals, batched)]
-    out = jax.vmap(lambda *a: eqn.primitive.bind(*a, **params),
-                   in_axes=[0 if b else None for b in batched])(*front)
-    outs = out if eqn.primitive.multiple_results else [out]
-    return [(jnp.moveaxis(o, 0, -1), True) for o in outs]
+    out = _batch_first(lambda *a: eqn.primitive.bind(*a, **params), vals, batched)
+    return _pairs(eqn, out)
+
+
+def _batch_first(fun, vals, batched):
+    """`jax.vmap(fun)` over the batched values, their batch moved to the front (FIRST ones
+    are there already) and the outputs' back to the end."""
+    front = [jnp.moveaxis(v, -1, 0) if b is True else v for v, b in zip(vals, batched)]
+    out = jax.vmap(fun, in_axes=[0 if b else None for b in batched])(*front)
+    return jax.tree.map(lambda o: jnp.moveaxis(o, 0, -1), out)
+
+
+def _pairs(eqn, out, flag=True):
+    """The (value, flag) pairs of an equation's output(s)."""
+    return [(o, flag) for o in (out if eqn.primitive.multiple_results else [out])]
 
 
 def _elementwise(eqn, vals, batched, size, **params):
@@ -191,9 +200,8 @@ def _elementwise(eqn, vals, batched, size, **params):
         dims = tuple(range(len(shape) - len(own), len(shape)))
         return lax.broadcast_in_dim(v, full, dims + ((len(shape),) if b else ()))
 
-    out = eqn.primitive.bind(*[conform(v, b, s) for v, b, s in zip(vals, batched, shapes)],
-                             **params)
-    return [(o, True) for o in out] if eqn.primitive.multiple_results else [(out, True)]
+    return _pairs(eqn, eqn.primitive.bind(
+        *[conform(v, b, s) for v, b, s in zip(vals, batched, shapes)], **params))
 
 
 def _broadcast_in_dim(eqn, vals, batched, size, shape, broadcast_dimensions, sharding):
@@ -321,11 +329,8 @@ def _call(eqn, vals, batched, size, **params):
     (`batch_major` functions: `jax.vmap` of it, the batch moved to the front and back)."""
     closed = _body(params)
     if params.get("name") == "batch_major_call":
-        front = [jnp.moveaxis(v, -1, 0) if b and b is not FIRST else v
-                 for v, b in zip(vals, batched)]
-        outs = jax.vmap(batch_major(core.jaxpr_as_fun(closed)),
-                        in_axes=[0 if b else None for b in batched])(*front)
-        return [(jnp.moveaxis(o, 0, -1), True) for o in outs]
+        return [(o, True) for o in _batch_first(batch_major(core.jaxpr_as_fun(closed)),
+                                                 vals, batched)]
     return evaluate(closed.jaxpr, closed.consts, vals, batched, size)
 
 
