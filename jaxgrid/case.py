@@ -29,7 +29,11 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from jaxgrid.checks import Range
+
 PQ, PV, SLACK, ISOLATED = 1, 2, 3, 4  # PSS/E bus type codes (IDE)
+TAP_RATIO = Range(0.1, 10.0, "p.u.")  # plausible off-nominal transformer ratios
+VOLTAGE = Range(0.0, 2.0, "p.u.", lo_open=True, hi_open=True)  # voltage set points and levels
 
 
 class CaseError(ValueError):
@@ -309,6 +313,7 @@ def build_case(
         index[number] = i
     if not buses:
         raise CaseError("no bus records", source)
+    _check_identities(source, generators, loads, branches)
 
     def resolve(kind, rows, cls):
         resolved = []
@@ -337,6 +342,29 @@ def build_case(
     return case
 
 
+def _check_identities(source, generators, loads, branches) -> None:
+    """CaseError at the second record with the identity of an earlier one, as PSS/E rejects
+    them: generators and loads by (bus, ID), lines and transformers each by (buses, circuit)."""
+    def ident(text) -> str:
+        return str(text).strip().upper()
+
+    tables = (
+        ("generator", generators, lambda r: (int(r["bus"]), ident(r["gen_id"]))),
+        ("load", loads, lambda r: (int(r["bus"]), ident(r["load_id"]))),
+        ("branch", branches, lambda r: (bool(r["is_transformer"]), frozenset(
+            (int(r["from_bus"]), int(r["to_bus"]))), ident(r["ckt"]))),
+    )
+    for kind, rows, key in tables:
+        first_line: dict = {}
+        for row in rows:
+            k = key(row)
+            if k in first_line:
+                what = "transformer" if kind == "branch" and row["is_transformer"] else kind
+                raise CaseError(f"{_describe(kind, row)}: duplicate {what} (the same "
+                                f"identity as line {first_line[k]})", source, row["line"])
+            first_line[k] = row["line"]
+
+
 def _check_branch_impedance(case: Case) -> None:
     br = case.branches
     zero = (br.r == 0) & (br.x == 0)
@@ -347,10 +375,13 @@ def _check_branch_impedance(case: Case) -> None:
             f"X = {br.x[k]:g}, R = {br.r[k]:g}: zero or non-finite series impedance "
             "is not supported (give the jumper a small reactance, e.g. X = 1e-4)",
             case.source, int(br.line[k]))
-    for k in np.flatnonzero(br.tap <= 0):
-        raise CaseError(
-            f"transformer {case.buses.number[br.from_bus[k]]}-{case.buses.number[br.to_bus[k]]}"
-            f" ckt '{br.ckt[k]}': ratio = {br.tap[k]:g}: must be > 0", case.source, int(br.line[k]))
+    for k, tap in enumerate(br.tap):
+        reason = TAP_RATIO.problem(tap)
+        if reason:
+            raise CaseError(
+                f"transformer {case.buses.number[br.from_bus[k]]}-"
+                f"{case.buses.number[br.to_bus[k]]} ckt '{br.ckt[k]}': ratio = {tap:g}: "
+                f"{reason}", case.source, int(br.line[k]))
 
 
 def islands(case: Case) -> tuple[int, np.ndarray]:

@@ -339,3 +339,86 @@ def test_skipped_records_are_warned_and_counted():
     assert case.skipped == {"two-terminal dc": 2, "facts": 1}
     # The 3-line DC records were consumed whole: the rest of the case is intact.
     assert case.n_bus == 3 and len(case.branches.r) == 2 and len(case.generators.bus) == 1
+
+
+# --------------------------------------------------------------------------- #
+# Issue 28: duplicate identities, implausible values, no bare exceptions
+# --------------------------------------------------------------------------- #
+
+def repeat_line(lines: list[str], number: int, count: int = 1) -> list[str]:
+    """Copy of `lines` with lines number .. number + count - 1 written twice."""
+    return lines[:number + count - 1] + lines[number - 1:number + count - 1] + lines[
+        number + count - 1:]
+
+
+@pytest.mark.parametrize("pattern, count, record", [
+    (r"\s*30,'1',", 1, r"generator at bus 30 id '1': duplicate generator"),
+    (r"\s*24,'1 ',1,", 1, r"load at bus 24 id '1': duplicate load"),
+    (r"\s*1,\s*2,'1 '", 1, r"branch 1-2 ckt '1': duplicate branch"),
+    (r"\s*2,\s*30,\s*0,'1 '", 4, r"transformer 2-30 ckt '1': duplicate transformer"),
+])
+def test_duplicate_record_identity(tmp_path, pattern, count, record):
+    """A record repeated (same bus and ID, or same buses and circuit) is rejected, as PSS/E
+    does, at the repeat's line, naming the first one."""
+    lines = ieee39_lines()
+    first = line_number(lines, pattern)
+    path = write(tmp_path, repeat_line(lines, first, count))
+    with pytest.raises(CaseError, match=rf"^{re.escape(str(path))}:{first + count}: {record} "
+                                        rf"\(.*line {first}\)"):
+        read_quietly(path)
+
+
+def test_duplicate_three_winding_transformer(tmp_path):
+    """A 3-winding transformer record (5 lines) given twice is rejected at the repeat."""
+    from conftest import andes_cases_dir
+
+    lines = (andes_cases_dir() / "wscc9/wscc9_3wxfr.raw").read_text().splitlines()
+    first = line_number(lines, r"\s*4,\s*5,\s*6,'1 '")
+    path = write(tmp_path, repeat_line(lines, first, 5))
+    with pytest.raises(CaseError, match=rf":{first + 5}: transformer 4-5-6 ckt '1': duplicate "
+                                        rf"transformer \(first at line {first}\)"):
+        read_quietly(path)
+
+
+TRANSFORMER_2_30 = r"\s*2,\s*30,\s*0,'1 '"
+
+
+@pytest.mark.parametrize("edit, message", [
+    # (line pattern, offset from it, field index, value) -> error text after file:line:
+    ((TRANSFORMER_2_30, 2, 0, "0.0"), r"transformer 2-30 ckt '1': WINDV1 gives an off-nominal "
+                                      r"ratio of 0: must lie in \[0.1, 10\] p.u."),
+    ((TRANSFORMER_2_30, 3, 0, "0.0"), r".*: WINDV2 gives an off-nominal ratio of 0"),
+    ((TRANSFORMER_2_30, 2, 0, "1e-300"), r".*: WINDV1 gives an off-nominal ratio of 1e-300"),
+    ((TRANSFORMER_2_30, 2, 0, "1e300"), r".*: WINDV1 = 1e300: must lie in \[-1e\+12, 1e\+12\]"),
+    ((r"0,\s+100.00, 30", 0, 1, " 0.0"), r"case identification: SBASE = 0.0: must lie in "
+                                         r"\(0, 1e\+06\] MVA"),
+    ((r"0,\s+100.00, 30", 0, 2, " 1e400"), r"case identification: REV = '1e400' is not a number"),
+    ((r"\s*24,' LBUS24", 0, 0, "1e20"), r"bus record: I = 1e20: must lie in \[1, 999999\]"),
+    ((r"\s*24,' LBUS24", 0, 7, "1e20"), r"bus 24: ZONE = 1e20: must lie in \[-2.14748e\+09"),
+    ((r"\s*24,' LBUS24", 0, 2, "-345.0"), r"bus 24: BASKV = -345.0: must lie in \[0, 10000\] kV"),
+    ((r"\s*30,'1',", 0, 4, "-10000.0"), r"generator at bus 30 id '1': QT = -10000 Mvar < "
+                                        r"QB = -9999 Mvar"),
+    ((r"\s*30,'1',", 0, 6, "0.0"), r"generator at bus 30 id '1': VS = 0.0: must lie in "
+                                   r"\(0, 2\) p.u."),
+])
+def test_implausible_raw_values(tmp_path, edit, message):
+    """Values that used to raise a bare ZeroDivisionError/OverflowError, or were accepted and
+    broke the power flow, give a CaseError with file:line: record: field."""
+    pattern, offset, index, value = edit
+    lines = ieee39_lines()
+    number = line_number(lines, pattern) + offset
+    path = write(tmp_path, set_field(lines, number, index, value))
+    with pytest.raises(CaseError, match=rf"^{re.escape(str(path))}:{number}: {message}"):
+        read_quietly(path)
+
+
+def test_three_winding_ratio_zero(tmp_path):
+    """WINDV = 0 in a 3-winding record: CaseError at the winding's line, no ZeroDivisionError."""
+    from conftest import andes_cases_dir
+
+    lines = (andes_cases_dir() / "wscc9/wscc9_3wxfr.raw").read_text().splitlines()
+    number = line_number(lines, r"\s*4,\s*5,\s*6,'1 '") + 3  # winding 2
+    path = write(tmp_path, set_field(lines, number, 0, "0.0"))
+    with pytest.raises(CaseError, match=rf":{number}: transformer 4-5-6 ckt '1': WINDV2 gives "
+                                        "an off-nominal ratio of 0"):
+        read_quietly(path)

@@ -29,7 +29,8 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from jaxgrid.case import ISOLATED, Case, CaseError, build_case
+from jaxgrid.case import ISOLATED, TAP_RATIO, VOLTAGE, Case, CaseError, build_case
+from jaxgrid.checks import Range
 
 SUPPORTED_VERSIONS = (23, 30, 31, 32, 33)
 
@@ -49,6 +50,15 @@ _LAYOUT = {23: 23, 30: 30, 31: 33, 32: 33, 33: 33}
 # A file may end after these sections; stopping earlier means it is truncated.
 _REQUIRED = {23: "branch", 30: "transformer", 33: "transformer"}
 _LINES_PER_RECORD = {"two-terminal dc": 3, "vsc dc": 3}
+
+# Any RAW real beyond this magnitude is a typing error (MW, Mvar, kV, p.u., W all stay far
+# below it); integers are Fortran INTEGER*4; bus numbers as PSS/E allows.
+REAL_FIELD = Range(-1e12, 1e12)
+INT_FIELD = Range(-(2 ** 31 - 1), 2 ** 31 - 1)
+BUS_NUMBER = Range(1, 999_999)
+SYSTEM_BASE = Range(0, 1e6, "MVA", lo_open=True)
+BASE_KV = Range(0, 1e4, "kV")
+FREQUENCY = Range(0, 1e3, "Hz")
 
 
 class RawWarning(UserWarning):
@@ -98,7 +108,10 @@ class _Record:
     def _raw(self, i: int) -> str:
         return self.fields[i] if i < len(self.fields) else ""
 
-    def num(self, i: int, name: str, default: float | None = None) -> float:
+    def num(self, i: int, name: str, default: float | None = None,
+            allowed: Range = REAL_FIELD) -> float:
+        """Field i as a float, CaseError naming it when missing, not a number or outside
+        `allowed`."""
         text = self._raw(i)
         if text == "":
             if default is None:
@@ -112,10 +125,14 @@ class _Record:
                             self.source, self.line) from None
         if not math.isfinite(value):
             raise CaseError(f"{self.what}: {name} = {text} is not finite", self.source, self.line)
+        reason = allowed.problem(value)
+        if reason:
+            raise CaseError(f"{self.what}: {name} = {text}: {reason}", self.source, self.line)
         return value
 
-    def int(self, i: int, name: str, default: int | None = None) -> int:
-        value = self.num(i, name, None if default is None else float(default))
+    def int(self, i: int, name: str, default: int | None = None,
+            allowed: Range = INT_FIELD) -> int:
+        value = self.num(i, name, None if default is None else float(default), allowed)
         if value != int(value):
             raise CaseError(f"{self.what}: {name} = {self._raw(i)} is not an integer",
                             self.source, self.line)
@@ -148,7 +165,7 @@ def _detect_version(first: list[str], source: str) -> int:
         return 23
     try:
         version = int(float(first[2]))
-    except ValueError:
+    except (ValueError, OverflowError):
         raise CaseError(f"case identification: REV = '{first[2]}' is not a number", source, 1)
     if version not in SUPPORTED_VERSIONS:
         raise CaseError(f"case identification: REV = {version}: RAW version not supported "
@@ -166,8 +183,9 @@ class _RawParser:
         head = _Record(split_fields(first), source, 1, "case identification")
         self.version = version or _detect_version(head.fields, source)
         self.layout = _LAYOUT[self.version]
-        self.base_mva = head.num(1, "SBASE", 100.0)
-        self.frequency = 60.0 if self.version == 23 else head.num(5, "BASFRQ", 60.0) or 60.0
+        self.base_mva = head.num(1, "SBASE", 100.0, SYSTEM_BASE)
+        self.frequency = 60.0 if self.version == 23 else head.num(
+            5, "BASFRQ", 60.0, FREQUENCY) or 60.0
         self.cursor.next("case title")
         self.cursor.next("case title")
         self.rows: dict[str, list[dict[str, Any]]] = {
@@ -178,6 +196,7 @@ class _RawParser:
         self.notes: list[str] = []
         self.bus_rows: dict[int, dict[str, Any]] = {}
         self.star_count = 0
+        self.transformer_lines: dict[tuple, int] = {}  # (buses, ckt) -> first line
 
     # -- driving -------------------------------------------------------------
     def parse(self) -> None:
@@ -236,16 +255,15 @@ class _RawParser:
             i, name, kv, ide, area, zone, vm, va = 0, 1, 2, 3, 6, 7, 8, 9
         else:
             i, name, kv, ide, area, zone, vm, va = 0, 1, 2, 3, 4, 5, 7, 8
-        number = rec.int(i, "I")
+        number = rec.int(i, "I", allowed=BUS_NUMBER)
         rec.what = f"bus {number}"
-        if number <= 0:
-            raise CaseError(f"bus {number}: I must be a positive bus number", self.source, rec.line)
         kind = rec.int(ide, "IDE", 1)
         if kind not in (1, 2, 3, 4):
             raise CaseError(f"bus {number}: IDE = {kind}: must be 1, 2, 3 or 4",
                             self.source, rec.line)
         row = dict(
-            number=number, name=rec.text(name, ""), kind=kind, base_kv=rec.num(kv, "BASKV", 0.0),
+            number=number, name=rec.text(name, ""), kind=kind,
+            base_kv=rec.num(kv, "BASKV", 0.0, BASE_KV),
             area=rec.int(area, "AREA", 1), zone=rec.int(zone, "ZONE", 1),
             vm=rec.num(vm, "VM", 1.0), va=math.radians(rec.num(va, "VA", 0.0)), line=rec.line)
         self.bus_rows[number] = row
@@ -306,11 +324,15 @@ class _RawParser:
                               f"using the system base {s:g} MVA")
             mbase = s
         reg = rec.int(7, "IREG", 0)
+        qt, qb = rec.num(4, "QT", 9999.0), rec.num(5, "QB", -9999.0)
+        if qt < qb:
+            raise CaseError(f"{rec.what}: QT = {qt:g} Mvar < QB = {qb:g} Mvar: the reactive "
+                            "limits need QB <= QT", self.source, rec.line)
         self.rows["generators"].append(dict(
             bus=bus, gen_id=gen_id, in_service=rec.int(14, "STAT", 1) != 0,
             pg=rec.num(2, "PG", 0.0) / s, qg=rec.num(3, "QG", 0.0) / s,
-            qmax=rec.num(4, "QT", 9999.0) / s, qmin=rec.num(5, "QB", -9999.0) / s,
-            vset=rec.num(6, "VS", 1.0), reg_bus=reg if reg != 0 else bus, mbase=mbase,
+            qmax=qt / s, qmin=qb / s,
+            vset=rec.num(6, "VS", 1.0, VOLTAGE), reg_bus=reg if reg != 0 else bus, mbase=mbase,
             zr=rec.num(9, "ZR", 0.0), zx=rec.num(10, "ZX", 1.0),
             pmax=rec.num(16, "PT", 9999.0) / s, pmin=rec.num(17, "PB", -9999.0) / s,
             line=rec.line))
@@ -320,6 +342,8 @@ class _RawParser:
         rec.what = f"branch {i}-{j} ckt '{ckt}'"
         if self.layout == 23:
             ratio, angle = rec.num(9, "RATIO", 0.0), rec.num(10, "ANGLE", 0.0)
+            if ratio != 0:
+                self._check_ratio(rec, "RATIO", ratio)
             gi, bi, gj, bj, st = 11, 12, 13, 14, 15
         else:
             ratio, angle = 0.0, 0.0
@@ -337,6 +361,11 @@ class _RawParser:
         i, j, k = rec.int(0, "I"), rec.int(1, "J"), rec.int(2, "K", 0)
         ckt = rec.text(3)
         rec.what = f"transformer {i}-{j}" + (f"-{k}" if k else "") + f" ckt '{ckt}'"
+        identity = (frozenset((i, j, k)), ckt.upper())
+        if identity in self.transformer_lines:
+            raise CaseError(f"{rec.what}: duplicate transformer (first at line "
+                            f"{self.transformer_lines[identity]})", self.source, rec.line)
+        self.transformer_lines[identity] = rec.line
         cw, cz, cm = rec.int(4, "CW", 1), rec.int(5, "CZ", 1), rec.int(6, "CM", 1)
         for name, code, allowed in (("CW", cw, (1, 2, 3)), ("CZ", cz, (1, 2, 3)),
                                     ("CM", cm, (1, 2))):
@@ -407,14 +436,24 @@ class _RawParser:
         windv = w.num(0, f"WINDV{n}", None if cw == 2 else 1.0)
         nomv = w.num(1, f"NOMV{n}", 0.0)
         base_kv = self.bus_rows[bus]["base_kv"]
-        if cw == 1:
-            return windv
-        if base_kv <= 0:
+        if cw != 1 and base_kv <= 0:
             raise CaseError(f"{w.what}: CW = {cw} needs the base kV of bus {bus}, "
                             f"which is {base_kv:g}", self.source, w.line)
-        if cw == 2:
-            return windv / base_kv
-        return windv * (nomv or base_kv) / base_kv
+        if cw == 1:
+            ratio = windv
+        elif cw == 2:
+            ratio = windv / base_kv
+        else:
+            ratio = windv * (nomv or base_kv) / base_kv
+        return self._check_ratio(w, f"WINDV{n}", ratio)
+
+    def _check_ratio(self, rec: _Record, name: str, ratio: float) -> float:
+        """`ratio` (p.u. of the bus base) if plausible, else CaseError naming field `name`."""
+        reason = TAP_RATIO.problem(ratio)
+        if reason:
+            raise CaseError(f"{rec.what}: {name} gives an off-nominal ratio of {ratio:g}: "
+                            f"{reason}", self.source, rec.line)
+        return ratio
 
     def _pair_impedance(self, imp: _Record, cz: int, at: int, r_name: str, x_name: str):
         """Series impedance of one winding pair on the system base, p.u."""

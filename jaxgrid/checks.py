@@ -1,0 +1,76 @@
+"""One rule for the numbers a user writes: finite and inside a stated range, with a unit.
+
+Every reader and every configuration dataclass states its ranges as `Range` values and
+reports a bad one as an `InputError` whose message names the key as the user wrote it:
+
+    study.toml: tasks.test.fault_durations[0] = nan: must be finite, in [0, inf) s
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+
+class InputError(ValueError):
+    """A value outside its allowed range; `key` names it as written (file and key)."""
+
+    def __init__(self, key: str, value, reason: str):
+        super().__init__(f"{key} = {value!r}: {reason}")
+        self.key, self.value, self.reason = key, value, reason
+
+    def renamed(self, key: str) -> InputError:
+        """The same error under another name (e.g. with the file and section in front)."""
+        return InputError(key, self.value, self.reason)
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """An allowed interval of a real value, [lo, hi] (open at an end where flagged), with a unit."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    unit: str = ""
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def __str__(self) -> str:
+        left, right = "(" if self.lo_open else "[", ")" if self.hi_open else "]"
+        text = f"{left}{self.lo:g}, {self.hi:g}{right}"
+        return f"{text} {self.unit}" if self.unit else text
+
+    def problem(self, value) -> str | None:
+        """Why `value` is not allowed ("must be finite, in [0, inf) s"), or None."""
+        try:
+            number = float(value)
+        except (TypeError, ValueError, OverflowError):
+            return f"must be a number in {self}"
+        if not math.isfinite(number):
+            return f"must be finite, in {self}"
+        below = number <= self.lo if self.lo_open else number < self.lo
+        above = number >= self.hi if self.hi_open else number > self.hi
+        return f"must lie in {self}" if below or above else None
+
+    def check(self, key: str, value) -> float:
+        """`value` as a float; InputError naming `key` when it is outside the range."""
+        reason = self.problem(value)
+        if reason:
+            raise InputError(key, value, reason)
+        return float(value)
+
+    def negated(self) -> Range:
+        """The range of −x (for a key that stores the negative of a field)."""
+        return Range(-self.hi, -self.lo, self.unit, self.hi_open, self.lo_open)
+
+
+def check_each(key: str, values, allowed: Range) -> tuple[float, ...]:
+    """Every entry of `values` checked; the error names `key[i]`."""
+    return tuple(allowed.check(f"{key}[{i}]", v) for i, v in enumerate(values))
+
+
+def check_unique(key: str, values) -> None:
+    """InputError naming `key` when an entry repeats."""
+    seen = set()
+    for v in values:
+        if v in seen:
+            raise InputError(key, list(values), f"{v} is listed more than once")
+        seen.add(v)
