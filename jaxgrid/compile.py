@@ -10,6 +10,7 @@ derivatives vanish at t = 0.
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
 from collections import Counter
 from typing import NamedTuple
@@ -61,7 +62,8 @@ _KINDS = {
 
 
 class ModelWarning(UserWarning):
-    """Unsupported dynamic models dropped in lenient mode."""
+    """Dynamic data dropped or approximated: unsupported models and records naming no
+    generator (lenient mode), and every model's notes."""
 
 
 class InitWarning(UserWarning):
@@ -115,7 +117,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     """
     pf = solve(case) if pf is None else pf
     notes: list[str] = []
-    records = _classify(dyr, *_unit_keys(case), options.strict, notes)
+    records = _classify(dyr, case, options.strict, notes)
     composite = [r for r in records["load"] if r.model in COMPOSITE_LOADS]
     records["load"] = [r for r in records["load"] if r.model not in COMPOSITE_LOADS]
     names = {}
@@ -157,6 +159,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
         governors, g_states = _controller_groups(
             case, records["governor"], GOVERNORS, keys, position,
             lambda model, p, k: model.init(p, jnp.asarray(pm0[k])))
+    _report_model_notes(case, groups, exciters + governors, notes)
 
     z_source = np.concatenate([g.params["ra"] + 1j * g.params["xs"] for g in machines])
     y_norton = ratio / z_source
@@ -207,6 +210,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
         omega_b=float(2 * np.pi * case.frequency_hz), pq_break=options.loads.pq_break,
         sweeps=options.sweeps if len(load_bus) else 1, precision="float64", notes=())
     _check_initial_state(model, options.init_tolerance, notes)
+    _check_values(model, options.precision)
     return with_precision(dataclasses.replace(model, notes=tuple(notes)), options.precision)
 
 
@@ -256,11 +260,15 @@ def _kind(name: str) -> str:
     return "other"
 
 
-def _classify(dyr: DyrData, keys: dict, load_keys: dict, strict: bool,
-              notes: list[str]) -> dict[str, list]:
-    """Supported records by kind; unsupported ones raise (strict) or warn with their fallback."""
+def _classify(dyr: DyrData, case: Case, strict: bool, notes: list[str]) -> dict[str, list]:
+    """Supported records by kind. Unsupported ones, and records naming a generator the case
+    does not have, raise (strict) or warn; those of out-of-service generators are noted."""
+    keys, load_keys = _unit_keys(case)
+    every_generator = {(int(case.buses.number[b]), str(g).strip().upper())
+                       for b, g in zip(case.generators.bus, case.generators.gen_id)}
     out: dict[str, list[DyrRecord]] = {"machine": [], "exciter": [], "governor": [], "load": []}
     unsupported: dict[str, list[DyrRecord]] = {}
+    orphans: list[DyrRecord] = []
     for r in dyr.records:
         kind = "load" if r.record_type == "USRLOD" else _kind(r.model)
         if r.model not in SUPPORTED:
@@ -269,11 +277,21 @@ def _classify(dyr: DyrData, keys: dict, load_keys: dict, strict: bool,
             raise ModelError(f"{r.source}:{r.line}: {r.model} at bus {r.bus} id "
                              f"'{r.device_id}': the case has no in-service load record "
                              f"(bus {r.bus}, LID '{r.device_id}')")
+        elif kind != "load" and _key(r) not in every_generator:
+            orphans.append(r)
         elif kind != "load" and _key(r) not in keys:
-            notes.append(f"{r.source}:{r.line}: {r.model} at bus {r.bus} id '{r.device_id}' "
-                         "has no in-service generator; ignored")
+            notes.append(f"{device_label(r)}: its generator is out of service; ignored")
         else:
             out[kind].append(r)
+    if orphans:
+        listing = "; ".join(device_label(r) for r in orphans[:10]) + (
+            f"; and {len(orphans) - 10} more" if len(orphans) > 10 else "")
+        message = (f"{len(orphans)} dynamic record(s) name a generator (bus, ID) that the "
+                   f"case {case.source} does not have: {listing}")
+        if strict:
+            raise ModelError(message + " (CompileOptions(strict=False) drops them)")
+        warnings.warn(message + "; dropped", ModelWarning, stacklevel=3)
+        notes.append(message + "; dropped")
     if unsupported:
         listing = "; ".join(
             f"{m} x{len(rs)} (first at line {rs[0].line}): " + _FALLBACK.get(
@@ -292,6 +310,51 @@ def _classify(dyr: DyrData, keys: dict, load_keys: dict, strict: bool,
                 raise ModelError(f"{r.source}:{r.line}: bus {r.bus} id '{r.device_id}' has "
                                  f"more than one {kind} model")
     return out
+
+
+def _report_model_notes(case: Case, machine_groups, controllers, notes: list[str]) -> None:
+    """Every model's `notes` (approximations, dropped data) into the compile report, with
+    one ModelWarning naming them."""
+    remarks = [line for model, units, params in machine_groups
+               for line in model.notes(params, _labels(case, model.name, units))]
+    remarks += [line for g in controllers for line in g.model.notes(g.params, g.labels)]
+    if remarks:
+        warnings.warn(f"{case.source}: {len(remarks)} model note(s): " + "; ".join(remarks[:10])
+                      + ("; ..." if len(remarks) > 10 else ""), ModelWarning, stacklevel=3)
+        notes.extend(remarks)
+
+
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _check_values(model: GridModel, precision: str) -> None:
+    """ModelError naming the device and parameter (or the model field) of a value that is
+    not finite, or that the cast to precision "float32" would turn into inf."""
+    limit = FLOAT32_MAX if precision == "float32" else math.inf
+    allowed = "finite" + (f" with |x| <= {limit:.3g} (precision = 'float32'; "
+                          "'float64' takes larger values)" if precision == "float32" else "")
+
+    def first_bad(values) -> int | None:
+        a = np.asarray(values)
+        if not np.issubdtype(a.dtype, np.inexact):
+            return None
+        flagged = np.flatnonzero(~np.isfinite(a) | (np.abs(a) > limit))
+        return int(flagged[0]) if flagged.size else None
+
+    for family in (model.machines, model.exciters, model.governors, model.loads):
+        for g in family:
+            for name, values in g.params.items():
+                k = first_bad(values)
+                if k is not None:
+                    one_per_unit = np.ndim(values) == 1 and k < len(g.labels)
+                    label = g.labels[k] if one_per_unit else g.model.name
+                    raise ModelError(f"{label}: {name.upper()} = "
+                                     f"{np.ravel(values)[k]:g}: must be {allowed}")
+    for path, values in jax.tree_util.tree_leaves_with_path(model):
+        k = first_bad(values)
+        if k is not None:
+            raise ModelError(f"compiled model{jax.tree_util.keystr(path)} = "
+                             f"{np.ravel(values)[k]}: must be {allowed}")
 
 
 def _labels(case: Case, name: str, units) -> tuple[str, ...]:

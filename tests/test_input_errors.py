@@ -422,3 +422,66 @@ def test_three_winding_ratio_zero(tmp_path):
     with pytest.raises(CaseError, match=rf":{number}: transformer 4-5-6 ckt '1': WINDV2 gives "
                                         "an off-nominal ratio of 0"):
         read_quietly(path)
+
+
+# --------------------------------------------------------------------------- #
+# Issue 28: dynamic data (compile)
+# --------------------------------------------------------------------------- #
+
+SMIB_RAW = raw_v33(
+    buses="1,'GEN', 230.0, 3, 1, 1, 1, 1.00, 0.0\n"
+          "2,'LOAD', 230.0, 1, 1, 1, 1, 1.00, 0.0\n",
+    loads="2,'1', 1, 1, 1, 50.0, 10.0, 0.0, 0.0, 0.0, 0.0, 1\n",
+    generators="1,'1', 50.0, 10.0, 9999.0, -9999.0, 1.00, 0, 100.0, 0.0, 0.3, 0.0, 0.0, "
+               "1.0, 1, 100.0, 9999.0, -9999.0\n",
+    branches="1, 2,'1', 0.0, 0.1, 0.0, 0, 0, 0, 0, 0, 0, 0, 1\n")
+IEEEG1_K8 = ("'IEEEG1' 1 0 0 20.0 0.0 0.0 0.1 0.1 -0.5 10.0 0.0 0.32 0.27 0.0 10.0 0.0 "
+             "0.0 0.13 0.25 0.0 0.12 0.48 0.10 /")
+
+
+def compile_smib(tmp_path, dyr_text: str, **options):
+    """compile_model of the two-bus system (GENCLS at bus 1) with DYR text."""
+    from jaxgrid.compile import CompileOptions, compile_model
+    from jaxgrid.io.dyr import read_dyr
+
+    raw = write(tmp_path, [SMIB_RAW], "smib.raw")
+    dyr = tmp_path / "smib.dyr"
+    dyr.write_text(dyr_text)
+    return compile_model(read_raw(raw), read_dyr(dyr), CompileOptions(**options))
+
+
+def test_dynamic_record_without_generator(tmp_path):
+    """A governor on a generator the case does not have (wrong ID): strict raises ModelError
+    naming file:line; lenient drops it with a ModelWarning and a line in GridModel.notes."""
+    from jaxgrid.compile import ModelWarning
+    from jaxgrid.models.base import ModelError
+
+    text = "1 'GENCLS' 1 3.0 0.0 /\n1 " + IEEEG1_K8.replace("'IEEEG1' 1", "'IEEEG1' 2") + "\n"
+    orphan = r"smib.dyr:2: IEEEG1 at bus 1 id '2'"
+    with pytest.raises(ModelError, match=rf"1 dynamic record\(s\) name a generator .*{orphan}"):
+        compile_smib(tmp_path, text)
+    with pytest.warns(ModelWarning, match=orphan):
+        model = compile_smib(tmp_path, text, strict=False)
+    assert any(re.search(orphan, note) for note in model.notes), model.notes
+    assert not model.governors
+
+
+def test_model_notes_reach_the_report(tmp_path):
+    """IEEEG1's dropped K2 + K4 + K6 + K8 is a ModelWarning and a GridModel.notes line that
+    names the unit."""
+    from jaxgrid.compile import ModelWarning
+
+    with pytest.warns(ModelWarning, match=r"IEEEG1 at bus 1 id '1': K2 \+ K4 \+ K6 \+ K8 = 0.1"):
+        model = compile_smib(tmp_path, "1 'GENCLS' 1 3.0 0.0 /\n1 " + IEEEG1_K8 + "\n")
+    assert any("drive no machine" in note for note in model.notes), model.notes
+
+
+@pytest.mark.parametrize("cons, field", [("1e300 0.0", "H"), ("3.0 1e300", "D")])
+def test_float32_overflow_is_named(tmp_path, cons, field):
+    """A CON within its range but beyond float32 is rejected at the precision cast, naming
+    the device and the parameter; float64 takes it."""
+    from jaxgrid.models.base import ModelError
+
+    with pytest.raises(ModelError, match=rf"GENCLS at bus 1 id '1': {field} = 1e\+300: must be "
+                                         r"finite with \|x\| <= 3.4e\+38"):
+        compile_smib(tmp_path, f"1 'GENCLS' 1 {cons} /\n")

@@ -106,6 +106,12 @@ class DeviceModel:
         return None
 
     @classmethod
+    def notes(cls, p: dict[str, np.ndarray], labels: Sequence[str] = ()) -> list[str]:
+        """Warn-level remarks on the data (approximations, dropped values), one line per
+        remark naming the unit by labels[k]; compile reports them (nothing by default)."""
+        return []
+
+    @classmethod
     def limits(cls, p: Params) -> dict[str, tuple[Array, Array]]:
         """Non-windup state limits {state: (lo, hi)}, applied after every update."""
         return {}

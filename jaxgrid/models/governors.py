@@ -69,11 +69,6 @@ class GovernorModel(DeviceModel):
         """(Pm (n,) p.u. MBASE, {state: d/dt}) at speed deviation Δω (n,) p.u."""
         raise NotImplementedError
 
-    @classmethod
-    def notes(cls, p: dict[str, np.ndarray]) -> list[str]:
-        """Warn-level remarks on the data (nothing by default)."""
-        return []
-
 
 class _ValveLimited(GovernorModel):
     """A governor whose first state x1 is a valve held non-windup in [VMIN, VMAX]."""
@@ -163,15 +158,16 @@ class Ieeeg1(GovernorModel):
         return dict(p, k_hp=p["k1"] + p["k3"] + p["k5"] + p["k7"])
 
     @classmethod
-    def notes(cls, p):
+    def notes(cls, p, labels=()):
         out = []
         k_hp = p["k1"] + p["k3"] + p["k5"] + p["k7"]
         k_lp = p["k2"] + p["k4"] + p["k6"] + p["k8"]
         for k, (hp, lp) in enumerate(zip(k_hp, k_lp)):
+            label = labels[k] if labels else f"IEEEG1 unit {k}"
             if abs(hp + lp - 1.0) > K_SUM_TOL:
-                out.append(f"IEEEG1 unit {k}: K1 + ... + K8 = {hp + lp:g}, not 1")
+                out.append(f"{label}: K1 + ... + K8 = {hp + lp:g}, not 1")
             if lp > 0:
-                out.append(f"IEEEG1 unit {k}: K2 + K4 + K6 + K8 = {lp:g} drive no machine "
+                out.append(f"{label}: K2 + K4 + K6 + K8 = {lp:g} drive no machine "
                            f"(JBUS = 0) and are dropped")
         return out
 
