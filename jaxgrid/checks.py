@@ -15,7 +15,9 @@ class InputError(ValueError):
     """A value outside its allowed range; `key` names it as written (file and key)."""
 
     def __init__(self, key: str, value, reason: str):
-        super().__init__(f"{key} = {value!r}: {reason}")
+        """Message "key = value: reason"; without a value (None) key + reason, the reason
+        then starting with its own separator (" is empty", ": buses [9] are not ...")."""
+        super().__init__(key + reason if value is None else f"{key} = {value!r}: {reason}")
         self.key, self.value, self.reason = key, value, reason
 
     def renamed(self, key: str) -> InputError:

@@ -34,9 +34,12 @@ from flax import struct
 
 from jaxgrid import network
 from jaxgrid.batching import vmap_minor
+from jaxgrid.case import VOLTAGE
+from jaxgrid.checks import InputError, Range, check_unique
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
-from jaxgrid.simulate import Bounds, Health, Task, advance, clip_closed, healthy, observe, shed
+from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, clip_closed, healthy, observe,
+                              shed)
 
 
 @struct.dataclass
@@ -65,7 +68,34 @@ class EnvParams:
     action_high: float = 0.0
 
 
+# The allowed EnvParams values. The reward is maximised and every weight and penalty enters it
+# with its sign fixed in `step` (c1·ΣΔV with ΔV <= 0, −c2, −c3, −c_pre, −M), so all are >= 0.
+PARAM_RANGES = {
+    "c_voltage": Range(0.0, 1e9, "per p.u. of voltage deviation"),
+    "c_shed": Range(0.0, 1e9, "per p.u. of load shed"),
+    "c_invalid": Range(0.0, 1e9, "per request"),
+    "c_prefault": Range(0.0, 1e9, "per request"),
+    "unstable_penalty": Range(0.0, 1e12, "(the reward -M of a failed episode)"),
+    "recovery_level": VOLTAGE,
+    "recovery_time": Range(0.0, 3600.0, "s"),
+    "action_low": Range(-1.0, 0.0, "of the initial load per step"),
+    "action_high": Range(-1.0, 0.0, "of the initial load per step"),
+}
 
+
+def check_params(values: dict, key=lambda field: field) -> None:
+    """InputError for an EnvParams value (given as {field: value}) outside PARAM_RANGES or an
+    action range with low > high; `key(field)` names the field as the user wrote it."""
+    for field, value in values.items():
+        PARAM_RANGES[field].check(key(field), value)
+    low, high = (values.get(f, getattr(EnvParams, f)) for f in ("action_low", "action_high"))
+    if low > high:
+        raise InputError(key("action_low"), low, f"must be <= action_high = {high}")
+
+
+AGENT_DT = Range(0.0, 60.0, "s", lo_open=True)
+EPISODE = Range(0.0, 3600.0, "s", lo_open=True)
+HISTORY = Range(1, 1000, "observations")
 
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
@@ -92,14 +122,19 @@ class EnvConfig:
     bounds: Bounds = Bounds()
 
     def __post_init__(self):
-        ratio = self.agent_dt / self.dt
-        if not (self.dt > 0 and abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
-            raise ValueError(f"agent_dt = {self.agent_dt} s must be a whole number of "
+        """InputError naming the field (as `key`) of a value outside its range."""
+        DT.check("dt", self.dt)
+        ratio = AGENT_DT.check("agent_dt", self.agent_dt) / self.dt
+        if not (abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
+            raise InputError("agent_dt", self.agent_dt, "must be a whole number (>= 1) of "
                              f"simulation steps dt = {self.dt} s")
-        if not isinstance(self.history, int) or self.history < 1:
-            raise ValueError(f"history = {self.history!r}: must be an int >= 1")
-        if not self.episode >= self.agent_dt:
-            raise ValueError(f"episode = {self.episode} s: must be >= agent_dt")
+        if isinstance(self.history, bool) or not isinstance(self.history, int):
+            raise InputError("history", self.history, f"must be an integer in {HISTORY}")
+        HISTORY.check("history", self.history)
+        if EPISODE.check("episode", self.episode) < self.agent_dt:
+            raise InputError("episode", self.episode, f"must be >= agent_dt = {self.agent_dt} s")
+        for name in ("observed_buses", "action_buses", "recovery_buses"):
+            check_unique(name, getattr(self, name) or ())
         outside = sorted(set(self.recovery_buses or ()) - set(self.observed_buses))
         if outside:
             raise ValueError(f"recovery_buses {outside} are not observed buses")

@@ -22,6 +22,7 @@ import numpy as np
 from flax import struct
 
 from jaxgrid import network
+from jaxgrid.checks import Range
 from jaxgrid.batching import vmap_minor
 from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, machine_state, solve_network,
                               update_loads)
@@ -60,6 +61,10 @@ class LoadChange:
     fraction: float
 
 
+DT = Range(1e-4, 0.05, "s")  # simulation steps this integrator is meant for (2-5 ms usual)
+POSITIVE = Range(0.0, 1e6, lo_open=True)
+
+
 @dataclasses.dataclass(frozen=True)
 class Bounds:
     """Physical bounds beyond which a rollout counts as diverged.
@@ -71,6 +76,10 @@ class Bounds:
 
     max_speed_dev: float = 0.2
     max_voltage: float = 3.0
+
+    def __post_init__(self):
+        POSITIVE.check("max_speed_dev", self.max_speed_dev)
+        POSITIVE.check("max_voltage", self.max_voltage)
 
 
 @struct.dataclass
@@ -290,8 +299,7 @@ def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: f
 
 
 def _samples(t_end: float, dt: float, decimation: int) -> int:
-    if not 1e-4 <= dt <= 0.05:
-        raise ValueError(f"dt = {dt!r} s: allowed range is [1e-4, 0.05] s (2-5 ms is usual)")
+    DT.check("dt", dt)
     if not isinstance(decimation, int) or decimation < 1:
         raise ValueError(f"decimation = {decimation!r}: must be an int >= 1")
     if not t_end > 0:

@@ -35,6 +35,7 @@ reading it back gives the identical definition.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import glob
@@ -50,8 +51,9 @@ import tomli_w
 
 from jaxgrid import cases
 from jaxgrid.case import Case
+from jaxgrid.checks import InputError, Range, check_each
 from jaxgrid.compile import CompileOptions, compile_model
-from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv, check_params
 from jaxgrid.grid import GridModel
 from jaxgrid.io import pnnl
 from jaxgrid.io.dyr import read_dyr
@@ -85,6 +87,14 @@ class GridSource:
     dyr: str | None = None
     task_config: str | None = None
     sim_config: str | None = None
+
+    def __post_init__(self):
+        if not self.load_levels:
+            raise InputError("load_levels", None, " is empty: give at least one load level")
+        check_each("load_levels", self.load_levels, LOAD_LEVEL)
+
+
+LOAD_LEVEL = Range(0.0, 10.0, "(factor on loads and dispatch)", lo_open=True)
 
 
 FILE_SWEEPS = 2  # network sweeps of a study from files (its step's accuracy is not measured)
@@ -341,26 +351,62 @@ def rebuild(study: Study, **compile_changes) -> Study:
                  tasks={k: fields(v) for k, v in d.tasks.items()})
 
 
+@contextlib.contextmanager
+def _named(name):
+    """Re-raise an InputError from inside under the key as the user wrote it, name(key)."""
+    try:
+        yield
+    except InputError as err:
+        raise err.renamed(name(err.key)) from None
+
+
 def build(grid: GridSource, name: str | None = None,
           compile: CompileSettings = CompileSettings(), env: dict | None = None,
-          params: dict | None = None, tasks: dict | None = None) -> Study:
+          params: dict | None = None, tasks: dict | None = None,
+          origin: str = "study") -> Study:
     """The study of `grid` with overrides of the source's env, params and task sets.
 
     env, params: {field: value}; tasks: {set name: {TaskSet field: value}} (a new name adds
-    a set, fault buses and durations then required).
+    a set, fault buses and durations then required). A bad value raises an InputError
+    naming it as written: "ORIGIN: env.dt" for an override (origin: the study file), the
+    PNNL file and key for a value read from one.
     """
     notes: list[str] = []
     if grid.builtin:
-        points, dyr, defaults = _builtin_points(grid)
+        with _named(lambda key: f"{origin}: {key}"):
+            points, dyr, defaults = _builtin_points(grid)
     elif grid.raw:
         points, dyr, defaults = _file_points(grid, notes)
     else:
         raise ValueError("a study needs [grid] builtin = NAME, or raw = [files] and dyr = FILE")
+    written = defaults.get("written", {})
+
+    def key_of(section: str, given: dict | None):
+        """name(key) of a field of `section` ("env", "tasks.train"); `given`: the overrides."""
+        def name(key: str) -> str:
+            field, bracket, index = key.partition("[")
+            where = written.get(f"{section}.{field}")
+            if field in (given or {}) or where is None:
+                where = f"{origin}: {section}.{field}"
+            return where + bracket + index
+        return name
+
     env_values = {**defaults["env"], **(env or {})}
     for key in ("observed_buses", "action_buses"):
         if key not in env_values:
-            raise ValueError(f"study: no {key}: give a task_config or [env] {key}")
+            raise ValueError(f"{origin}: no {key}: give a task_config or [env] {key}")
     env_values["action_buses"] = tuple(env_values["action_buses"])
+    env_key = key_of("env", env)
+    with _named(env_key):
+        config = EnvConfig(**env_values)
+    buses = defaults.get("buses") or bus_table(points[0][2], dyr)
+    for b in config.action_buses:
+        if not buses.loaded.get(b, False):
+            raise InputError(env_key("action_buses"), list(config.action_buses),
+                             f"bus {b} " + ("carries no load" if b in buses.loaded
+                                            else "is not in the case"))
+    param_values = {**defaults["params"], **(params or {})}
+    check_params(param_values, key_of("params", params))
     compile = dataclasses.replace(compile, sweeps=compile.sweeps or defaults["sweeps"])
     options = CompileOptions(strict=compile.strict, loads=compile.loads,
                              load_buses=env_values["action_buses"], motors=compile.motors,
@@ -368,22 +414,27 @@ def build(grid: GridSource, name: str | None = None,
                              sweeps=compile.sweeps)
     models = [compile_model(c, dyr, options) for _, _, c in points]
     stacked = stack_models(models, [source for _, source, _ in points])
-    config = EnvConfig(**env_values)
     for key in ("observed_buses", "recovery_buses"):
-        _check_buses(getattr(config, key) or (), models[0], f"env.{key}")
+        _check_buses(getattr(config, key) or (), models[0], env_key(key))
     task_sets = {}
     for set_name in sorted(set(defaults["tasks"]) | set(tasks or {})):
-        values = {**defaults["tasks"].get(set_name, {}), **(tasks or {}).get(set_name, {})}
+        given = (tasks or {}).get(set_name, {})
+        values = {**defaults["tasks"].get(set_name, {}), **given}
         missing = {"fault_buses", "fault_durations"} - set(values)
         if missing:
-            raise ValueError(f"study: tasks.{set_name} needs {sorted(missing)}")
-        task_sets[set_name] = TaskSet(**values)
-        _check_buses(task_sets[set_name].fault_buses, models[0], f"tasks.{set_name}.fault_buses")
+            raise ValueError(f"{origin}: tasks.{set_name} needs {sorted(missing)}")
+        task_key = key_of(f"tasks.{set_name}", given)
+        with _named(task_key):
+            task_sets[set_name] = TaskSet(**values)
+        _check_buses(task_sets[set_name].fault_buses, models[0], task_key("fault_buses"))
+        for i, start in enumerate(task_sets[set_name].fault_starts):
+            if start >= config.episode:
+                raise InputError(task_key(f"fault_starts[{i}]"), start, "the fault must start "
+                                 f"inside the episode (episode = {config.episode:g} s)")
         task_sets[set_name].points(len(points))
     definition = StudyDefinition(
         name=name or defaults["name"], grid=grid, compile=compile, env=config,
-        params=EnvParams(**{**defaults["params"], **(params or {})}), tasks=task_sets)
-    buses = defaults.get("buses") or bus_table(points[0][2], dyr)
+        params=EnvParams(**param_values), tasks=task_sets)
     if defaults.get("pnnl_task"):
         notes.extend(_pnnl_checks(defaults["pnnl_task"], config, buses, models[0],
                                   points[0][2].base_mva))
@@ -397,12 +448,14 @@ def build(grid: GridSource, name: str | None = None,
 
 
 def _builtin_points(grid: GridSource):
+    studies = [n for n in cases.names() if n.endswith("_fidvr")]
+    if grid.builtin not in studies:
+        what = "a network without dynamic data" if grid.builtin in cases.names() else \
+            "not a built-in case"
+        raise InputError("grid.builtin", grid.builtin, f"{what}; study cases: "
+                         + ", ".join(studies))
     made = [cases.load(grid.builtin, load_level=level) for level in grid.load_levels]
     first = made[0]
-    if not hasattr(first, "task_sets"):
-        raise ValueError(f"built-in {grid.builtin!r} is a network without dynamic data; "
-                         "study cases: " + ", ".join(n for n in cases.names()
-                                                     if n.endswith("_fidvr")))
     points = [(f"load{100 * s.load_level:g}", f"jaxgrid.cases.{grid.builtin}"
                f"(load_level={s.load_level:g})", s.case) for s in made]
     defaults = {
@@ -431,7 +484,7 @@ def _file_points(grid: GridSource, notes: list[str]):
         if difference:
             raise ValueError(f"{path} and {first_path} are not one grid: {difference}")
     defaults = {"name": Path(grid.task_config or grid.raw[0]).stem, "env": {}, "params": {},
-                "tasks": {}, "sweeps": FILE_SWEEPS}
+                "tasks": {}, "sweeps": FILE_SWEEPS, "written": {}}
     dyr = read_dyr(grid.dyr)
     if grid.task_config:
         buses = bus_table(points[0][2], dyr)
@@ -453,12 +506,20 @@ def _file_points(grid: GridSource, notes: list[str]):
                         tasks={"train": {"fault_buses": fault_buses,
                                          "fault_starts": task.fault_starts,
                                          "fault_durations": task.fault_durations}})
+        defaults["written"].update({field: f"{task.source}: {key}" for field, key in (
+            ("env.observed_buses", "observationScopeAry"), ("env.action_buses", "actionScopeAry"),
+            ("env.agent_dt", "envStepTimeInSec"), ("env.history", "historyObservationSize"),
+            ("tasks.train.fault_buses", "faultBusCandidates"),
+            ("tasks.train.fault_starts", "faultStartTimeCandidates"),
+            ("tasks.train.fault_durations", "faultDurationCandidates"))})
     if grid.sim_config:
         sim = pnnl.read_sim_config(grid.sim_config)
         notes.extend(f"{sim.source}: {n}" for n in sim.notes)
         notes.extend(f"{sim.source}: key {k!r} is not understood and was not used"
                      for k in sim.unknown)
         defaults["env"].update(dt=sim.dt, episode=sim.t_end)
+        defaults["written"].update({"env.dt": f"{sim.source}: simuTimeStepSec",
+                                    "env.episode": f"{sim.source}: totalSimuTimeSec"})
         if sim.fault_r is not None and "train" in defaults["tasks"]:
             defaults["tasks"]["train"].update(fault_r=sim.fault_r, fault_x=sim.fault_x)
     return points, dyr, defaults
@@ -517,7 +578,7 @@ def _scope(kind: str, entries, buses: BusTable, source: str, key: str, min_kv: f
 def _check_buses(buses, model: GridModel, key: str) -> None:
     missing = [b for b in buses if b not in model.bus_numbers]
     if missing:
-        raise ValueError(f"study: {key}: buses {missing} are not in the case")
+        raise InputError(key, None, f": buses {missing} are not in the case")
 
 
 def _pnnl_checks(task: pnnl.PnnlTask, config: EnvConfig, buses: BusTable, model: GridModel,
@@ -611,7 +672,8 @@ def read_study(path: str | Path) -> Study:
     if "raw" in grid:
         raws = [grid["raw"]] if isinstance(grid["raw"], str) else grid["raw"]
         grid["raw"] = [str(p) for r in raws for p in _paths(base, r, path)]
-    source = _typed(GridSource, grid, path, "grid")
+    with _named(lambda key: f"{path}: grid.{key}"):
+        source = _typed(GridSource, grid, path, "grid")
     compile_settings = _typed(CompileSettings, data.get("compile", {}), path, "compile")
     env = _fields(EnvConfig, data.get("env", {}), path, "env")
     params = _fields(EnvParams, data.get("params", {}), path, "params")
@@ -621,7 +683,7 @@ def read_study(path: str | Path) -> Study:
     if name is not None and not isinstance(name, str):
         raise ValueError(f"{path}: name = {name!r}: must be a string")
     return build(source, name=name, compile=compile_settings, env=env, params=params,
-                 tasks=tasks)
+                 tasks=tasks, origin=str(path))
 
 
 def write_study(study: Study | StudyDefinition, path: str | Path) -> None:

@@ -15,8 +15,13 @@ from collections.abc import Sequence
 import numpy as np
 from flax import struct
 
+from jaxgrid.checks import InputError, Range, check_each
 from jaxgrid.grid import GridModel
 from jaxgrid.simulate import FaultEvent, Task, make_task, stack_tasks
+
+
+FAULT_TIME = Range(0.0, 3600.0, "s")
+FAULT_IMPEDANCE = Range(0.0, 1e6, "p.u.")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,12 +67,14 @@ class TaskSet:
     fault_x: float = 1e-4
 
     def __post_init__(self):
+        """InputError naming the field (and entry) of a value outside its range."""
         for name in ("fault_buses", "fault_durations", "fault_starts"):
             if not getattr(self, name):
-                raise ValueError(f"task set: {name} is empty")
-        if min(self.fault_durations) < 0 or min(self.fault_starts) < 0:
-            raise ValueError(f"task set: fault durations {self.fault_durations} and starts "
-                             f"{self.fault_starts} must be >= 0 s")
+                raise InputError(name, None, " is empty")
+        check_each("fault_durations", self.fault_durations, FAULT_TIME)
+        check_each("fault_starts", self.fault_starts, FAULT_TIME)
+        FAULT_IMPEDANCE.check("fault_r", self.fault_r)
+        FAULT_IMPEDANCE.check("fault_x", self.fault_x)
 
     def points(self, n_points: int) -> tuple[int, ...]:
         """The operating-point indices of the set, checked against n_points."""

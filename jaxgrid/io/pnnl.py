@@ -37,6 +37,11 @@ import json
 import math
 from pathlib import Path
 
+from jaxgrid.checks import Range, check_each, check_unique
+from jaxgrid.env import AGENT_DT, EPISODE, HISTORY, PARAM_RANGES, check_params
+from jaxgrid.simulate import DT
+from jaxgrid.tasks import FAULT_IMPEDANCE, FAULT_TIME
+
 # PNNL key -> EnvParams field (unstableReward is negated: EnvParams holds the penalty M).
 PARAM_KEYS = {"observationWeight": "c_voltage", "actionPenalty": "c_shed",
               "invalidActionPenalty": "c_invalid", "preFaultActionPenalty": "c_prefault",
@@ -156,17 +161,23 @@ class _Keys:
             return default
         return self.data[key]
 
-    def number(self, key, default=None) -> float:
+    def name(self, key) -> str:
+        """The key as the user wrote it, with its file."""
+        return f"{self.path}: {self.prefix}{key}"
+
+    def number(self, key, default=None, allowed: Range | None = None) -> float:
         value = self.get(key, default)
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(
                 value):
-            raise self._bad(key, value, "a number")
-        return float(value)
+            raise self._bad(key, value, "a number" + (f" in {allowed}" if allowed else ""))
+        return allowed.check(self.name(key), value) if allowed else float(value)
 
-    def integer(self, key, default=None) -> int:
+    def integer(self, key, default=None, allowed: Range | None = None) -> int:
         value = self.get(key, default)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self._bad(key, value, "an integer")
+        if allowed:
+            allowed.check(self.name(key), value)
         return value
 
     def boolean(self, key, default=None) -> bool:
@@ -188,12 +199,12 @@ class _Keys:
             raise self._bad(key, value, "a non-empty list of names")
         return tuple(str(v).strip() for v in value)
 
-    def numbers(self, key, default=None) -> tuple[float, ...]:
+    def numbers(self, key, default=None, allowed: Range = Range()) -> tuple[float, ...]:
         value = self.get(key, default)
         if not isinstance(value, list) or not value or not all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
             raise self._bad(key, value, "a non-empty list of numbers")
-        return tuple(float(v) for v in value)
+        return check_each(self.name(key), value, allowed)
 
     def unknown(self, known) -> tuple[str, ...]:
         return tuple(f"{self.prefix}{k}" for k in self.data if k not in known)
@@ -219,28 +230,37 @@ def read_task_config(path: str | Path) -> PnnlTask:
         raise keys._bad("actionValueRanges", ranges, "one range shared by every action bus "
                         "(per-bus ranges are not implemented)")
     low, high = (float(v) for v in ranges[0])
-    params = {field: keys.number(key) for key, field in PARAM_KEYS.items()}
+    params = {field: keys.number(key, allowed=PARAM_RANGES[field].negated()
+                                 if key == "unstableReward" else PARAM_RANGES[field])
+              for key, field in PARAM_KEYS.items()}
     params["unstable_penalty"] = -params["unstable_penalty"]
     params.update(action_low=low, action_high=high)
+    written = {field: keys.name(key) for key, field in PARAM_KEYS.items()}
+    written.update(action_low=keys.name("actionValueRanges[0][0]"),
+                   action_high=keys.name("actionValueRanges[0][1]"))
+    check_params(params, written.get)
     notes = [f"{key} = {keys.get(key)!r}: {why}" for key, why in _NOTED_TASK_KEYS.items()
              if key in keys.data]
     p_mw = keys.numbers("actionBusesPValue") if "actionBusesPValue" in keys.data else None
     action = keys.texts("actionScopeAry")
+    check_unique(keys.name("actionScopeAry"), action)
+    observed = keys.texts("observationScopeAry")
+    check_unique(keys.name("observationScopeAry"), observed)
     if len(ranges) not in (1, len(action)) and action_scope == "Bus":
         raise keys._bad("actionValueRanges", ranges, f"one pair, or one per action bus "
                         f"({len(action)})")
     return PnnlTask(
         source=str(path), name=keys.text("environmentName", path.stem),
-        observation_scope=observation_scope, observed=keys.texts("observationScopeAry"),
-        observed_min_kv=(keys.number("observationVoltThreshold", 0.0) / 1000.0
-                         if observation_scope == "Zone" else 0.0),
+        observation_scope=observation_scope, observed=observed,
+        observed_min_kv=(keys.number("observationVoltThreshold", 0.0, Range(0, 1e7, "V"))
+                         / 1000.0 if observation_scope == "Zone" else 0.0),
         action_scope=action_scope, action=action,
-        history=keys.integer("historyObservationSize", 1),
-        agent_dt=keys.number("envStepTimeInSec"),
+        history=keys.integer("historyObservationSize", 1, HISTORY),
+        agent_dt=keys.number("envStepTimeInSec", allowed=AGENT_DT),
         include_action_status=keys.boolean("includeActionStatusInObservations", True),
         params=params, fault_buses=keys.texts("faultBusCandidates"),
-        fault_starts=keys.numbers("faultStartTimeCandidates", [1.0]),
-        fault_durations=keys.numbers("faultDurationCandidates"),
+        fault_starts=keys.numbers("faultStartTimeCandidates", [1.0], FAULT_TIME),
+        fault_durations=keys.numbers("faultDurationCandidates", allowed=FAULT_TIME),
         counts={k: keys.integer(k) for k in COUNT_KEYS if k in keys.data},
         action_p_mw=p_mw, notes=tuple(notes), unknown=keys.unknown(_TASK_KEYS))
 
@@ -269,7 +289,8 @@ def read_sim_config(path: str | Path) -> PnnlSimConfig:
         z_keys = _Keys(z if isinstance(z, dict) else {}, path, "acscConfigBean.zLG.")
         if not isinstance(z, dict):
             raise bean._bad("zLG", z, "an object {re, im}")
-        r, x = z_keys.number("re", 0.0), z_keys.number("im", 0.0)
+        r = z_keys.number("re", 0.0, FAULT_IMPEDANCE)
+        x = z_keys.number("im", 0.0, FAULT_IMPEDANCE)
         if r or x:
             fault_r, fault_x = r, x
         else:
@@ -279,6 +300,6 @@ def read_sim_config(path: str | Path) -> PnnlSimConfig:
         if rest:
             notes.append(f"acscConfigBean {', '.join(rest)}: the original's example fault and "
                          "load-flow settings; faults come from the task set")
-    return PnnlSimConfig(source=str(path), dt=keys.number("simuTimeStepSec"),
-                         t_end=keys.number("totalSimuTimeSec"), fault_r=fault_r,
+    return PnnlSimConfig(source=str(path), dt=keys.number("simuTimeStepSec", allowed=DT),
+                         t_end=keys.number("totalSimuTimeSec", allowed=EPISODE), fault_r=fault_r,
                          fault_x=fault_x, notes=tuple(notes), unknown=tuple(unknown))
