@@ -258,3 +258,117 @@ def test_the_papers_300_bus_system_from_its_files(shared_cases):
     names = json.loads(task.read_text())["actionScopeAry"]
     assert [model.bus_names[model.bus_index(b)] for b in config.action_buses] == names
     assert not [n for n in study.notes if "but the case gives" in n]
+
+
+# --------------------------------------------------------------------------- #
+# Issue 28: every value range-checked, named as the user wrote it
+# --------------------------------------------------------------------------- #
+
+ONE_SET = '[tasks.test]\nfault_buses = [4]\n'
+
+
+@pytest.mark.parametrize("toml, message", [
+    ('[params]\nc_voltage = nan\n', r"study.toml: params.c_voltage = nan: must be finite"),
+    ('[params]\nunstable_penalty = inf\n', r"params.unstable_penalty = inf: must be finite"),
+    ('[params]\nc_shed = -150.0\n', r"params.c_shed = -150.0: must lie in \[0, 1e\+09\]"),
+    ('[params]\nrecovery_level = -0.5\n', r"params.recovery_level = -0.5: must lie in "
+                                          r"\(0, 2\) p.u."),
+    ('[params]\naction_low = -0.1\naction_high = -0.2\n',
+     r"params.action_low = -0.1: must be <= action_high = -0.2"),
+    ('[params]\naction_high = nan\n', r"params.action_high = nan: must be finite"),
+    ('[env]\ndt = 0.0\n', r"study.toml: env.dt = 0.0: must lie in \[0.0001, 0.05\] s"),
+    ('[env]\ndt = 1e-12\n', r"env.dt = 1e-12: must lie in \[0.0001, 0.05\] s"),
+    ('[env]\nagent_dt = inf\n', r"env.agent_dt = inf: must be finite, in \(0, 60\] s"),
+    ('[env]\nagent_dt = nan\n', r"env.agent_dt = nan: must be finite"),
+    ('[env]\nagent_dt = 0.1003\n', r"env.agent_dt = 0.1003: must be a whole number"),
+    ('[env]\nepisode = inf\n', r"env.episode = inf: must be finite"),
+    ('[env]\nhistory = 100000000000000000\n', r"env.history = 100000000000000000: must lie in "
+                                             r"\[1, 1000\] observations"),
+    ('[env]\nobserved_buses = [4, 7, 4]\n', r"env.observed_buses = \[4, 7, 4\]: 4 is listed "
+                                            "more than once"),
+    ('[env]\naction_buses = [4]\n', r"study.toml: env.action_buses = \[4\]: bus 4 carries no "
+                                    "load"),
+    ('[env.bounds]\nmax_voltage = -1.0\n', r"max_voltage = -1.0: must lie in \(0, 1e\+06\]"),
+    (ONE_SET + 'fault_durations = [nan]\n',
+     r"study.toml: tasks.test.fault_durations\[0\] = nan: must be finite"),
+    (ONE_SET + 'fault_durations = [0.1]\nfault_r = -0.01\n',
+     r"tasks.test.fault_r = -0.01: must lie in \[0, 1e\+06\] p.u."),
+    (ONE_SET + 'fault_durations = [0.1]\nfault_x = nan\n', r"tasks.test.fault_x = nan"),
+    (ONE_SET + 'fault_durations = [0.1]\nfault_starts = [1.0, 20.0]\n',
+     r"tasks.test.fault_starts\[1\] = 20.0: the fault must start inside the episode "
+     r"\(episode = 10 s\)"),
+])
+def test_out_of_range_study_values_are_named(tmp_path, toml, message):
+    """NaN, inf, wrong signs and inconsistent values in a study file: an error naming the key
+    as written, with the allowed range and unit."""
+    path = tmp_path / "study.toml"
+    path.write_text('[grid]\nbuiltin = "ieee39_fidvr"\n' + toml)
+    with pytest.raises(ValueError, match=message):
+        read_study(path)
+
+
+@pytest.mark.parametrize("grid, message", [
+    ('builtin = "ieee39"', r"study.toml: grid.builtin = 'ieee39': a network without dynamic "
+                           "data; study cases: .*ieee39_fidvr"),
+    ('builtin = "ieee39_fidvr"\nload_levels = []', r"study.toml: grid.load_levels is empty"),
+    ('builtin = "ieee39_fidvr"\nload_levels = [-1.0]',
+     r"study.toml: grid.load_levels\[0\] = -1.0: must lie in \(0, 10\]"),
+])
+def test_bad_builtin_grid_is_named(tmp_path, grid, message):
+    """A network name or an empty load-level list: no TypeError or IndexError."""
+    path = tmp_path / "study.toml"
+    path.write_text(f"[grid]\n{grid}\n")
+    with pytest.raises(ValueError, match=message):
+        read_study(path)
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("unstableReward", 1000, r"unstableReward = 1000: must lie in \[-1e\+12, -0\]"),
+    ("observationWeight", float("nan"), r"observationWeight = nan: must be a number"),
+    ("minVoltRecoveryLevel", -0.5, r"minVoltRecoveryLevel = -0.5: must lie in \(0, 2\) p.u."),
+    ("actionPenalty", -1.0, r"actionPenalty = -1.0: must lie in \[0, 1e\+09\]"),
+    ("actionValueRanges", [[0.0, -0.2]], r"actionValueRanges\[0\]\[0\] = 0.0: must be <= "
+                                          "action_high = -0.2"),
+    ("faultDurationCandidates", [0.1, -0.05], r"faultDurationCandidates\[1\] = -0.05: must lie "
+                                               r"in \[0, 3600\] s"),
+    ("historyObservationSize", 10 ** 20, r"historyObservationSize = 100000000000000000000: "
+                                         r"must lie in \[1, 1000\]"),
+    ("envStepTimeInSec", 0, r"envStepTimeInSec = 0: must lie in \(0, 60\] s"),
+    ("actionScopeAry", ["Bus504", "Bus507", "Bus504"], r"actionScopeAry = .*: Bus504 is listed "
+                                                        "more than once"),
+])
+def test_task_json_values_are_range_checked(shared_cases, tmp_path, key, value, message):
+    """Out-of-range PNNL task values are named by file and key at reading."""
+    from jaxgrid.io.pnnl import read_task_config
+
+    data = json.loads((shared_cases / TASK).read_text())
+    path = tmp_path / "task.json"
+    path.write_text(json.dumps({**data, key: value}))
+    with pytest.raises(ValueError, match=f"task.json: {message}"):
+        read_task_config(path)
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"simuTimeStepSec": 0}, r"simuTimeStepSec = 0: must lie in \[0.0001, 0.05\] s"),
+    ({"totalSimuTimeSec": 1e9}, r"totalSimuTimeSec = 1000000000.0: must lie in \(0, 3600\] s"),
+    ({"acscConfigBean": {"zLG": {"re": -0.1, "im": 0.0}}}, r"acscConfigBean.zLG.re = -0.1: must "
+                                                           r"lie in \[0, 1e\+06\] p.u."),
+])
+def test_sim_json_values_are_range_checked(shared_cases, tmp_path, change, message):
+    from jaxgrid.io.pnnl import read_sim_config
+
+    data = json.loads((shared_cases / SIM).read_text())
+    path = tmp_path / "sim.json"
+    path.write_text(json.dumps({**data, **change}))
+    with pytest.raises(ValueError, match=f"sim.json: {message}"):
+        read_sim_config(path)
+
+
+def test_cross_checks_name_the_pnnl_key(shared_cases, tmp_path):
+    """agent_dt not a multiple of the file's dt: named by the task file's key."""
+    data = json.loads((shared_cases / TASK).read_text())
+    path = tmp_path / "task.json"
+    path.write_text(json.dumps({**data, "envStepTimeInSec": 0.1003}))
+    with pytest.raises(ValueError, match=r"task.json: envStepTimeInSec = 0.1003: must be a whole "
+                                         r"number \(>= 1\) of simulation steps"):
+        from_files(shared_cases / BASE, shared_cases / DYR, path, shared_cases / SIM)
