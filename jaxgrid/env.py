@@ -38,8 +38,8 @@ from jaxgrid.case import VOLTAGE
 from jaxgrid.checks import InputError, Range, check_unique
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
-from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, clip_closed, healthy, observe,
-                              shed)
+from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, clip_closed, initial_health,
+                              observe, shed)
 
 
 @struct.dataclass
@@ -290,7 +290,7 @@ class LoadSheddingEnv:
         vm, obs = self._observe(grid, x, jnp.zeros((), real), task, self._fault(grid, task))
         history = jnp.tile(obs, (self.config.history, 1))
         check = (vm >= params.recovery_level) & self.recovery_mask
-        state = EnvState(grid=x, health=healthy(real), task=task,
+        state = EnvState(grid=x, health=initial_health(grid), task=task,
                          step=jnp.zeros((), jnp.int32), history=history,
                          recovery_check=check, done=jnp.zeros((), bool))
         return history.reshape(-1), state

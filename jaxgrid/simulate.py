@@ -247,6 +247,30 @@ def healthy(real) -> Health:
     return Health(jnp.zeros((), bool), jnp.asarray(jnp.inf, real), jnp.zeros((), real))
 
 
+def parameters_valid(model: GridModel):
+    """() bool: every float array of the model finite and every device CON inside its range.
+
+    compile_model checks both; this catches values changed through the API afterwards
+    (a NaN or negative H would otherwise make a machine an infinite bus).
+    """
+    ok = [jnp.all(jnp.isfinite(a)) for a in jax.tree.leaves(model)
+          if jnp.issubdtype(jnp.asarray(a).dtype, jnp.inexact)]
+    for family in (model.machines, model.exciters, model.governors, model.loads):
+        for g in family:
+            for con in g.model.cons:
+                v = g.params[con.name]
+                ok.append(jnp.all((v >= con.lo) & (v <= con.hi) & ((v > 0) | (not con.positive))))
+    return jnp.all(jnp.stack(ok))
+
+
+def initial_health(model: GridModel) -> Health:
+    """Health at t = 0: diverged at 0 s when the model's parameters are not valid."""
+    real = model.network.real_dtype
+    bad = ~parameters_valid(model)
+    return healthy(real).replace(diverged=bad, diverged_at=jnp.where(bad, 0.0, jnp.inf)
+                                 .astype(real))
+
+
 def advance(model: GridModel, x: GridState, health: Health, first_step, n: int, dt: float,
             task: Task, fault: network.Fault, bounds: Bounds):
     """n Heun steps from step index `first_step` (traced int); (state, health) after them.
@@ -289,7 +313,8 @@ def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: f
 
     x0 = model.initial
     first = observe(model, x0, jnp.zeros((), real), dt, task, fault) + (jnp.zeros((), real),)
-    (x, health), samples = jax.lax.scan(sample, (x0, healthy(real)), jnp.arange(n_samples))
+    (x, health), samples = jax.lax.scan(sample, (x0, initial_health(model)),
+                                        jnp.arange(n_samples))
     vm, va, speed, angle, left, flags, residual = jax.tree.map(
         lambda f, s: jnp.concatenate([f[None], s]), first, samples)
     t = jnp.arange(n_samples + 1, dtype=real) * (decimation * dt)
@@ -302,8 +327,7 @@ def _samples(t_end: float, dt: float, decimation: int) -> int:
     DT.check("dt", dt)
     if not isinstance(decimation, int) or decimation < 1:
         raise ValueError(f"decimation = {decimation!r}: must be an int >= 1")
-    if not t_end > 0:
-        raise ValueError(f"t_end = {t_end!r} s: must be > 0")
+    Range(0.0, 3600.0, "s", lo_open=True).check("t_end", t_end)
     return max(1, int(round(t_end / (dt * decimation))))
 
 

@@ -8,6 +8,7 @@ Every broken input has a control: the unbroken text parses (or solves).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import warnings
@@ -485,3 +486,18 @@ def test_float32_overflow_is_named(tmp_path, cons, field):
     with pytest.raises(ModelError, match=rf"GENCLS at bus 1 id '1': {field} = 1e\+300: must be "
                                          r"finite with \|x\| <= 3.4e\+38"):
         compile_smib(tmp_path, f"1 'GENCLS' 1 {cons} /\n")
+
+
+@pytest.mark.parametrize("h", [float("nan"), -3.0])
+def test_invalid_parameter_set_through_the_api_diverges_at_t0(tmp_path, h):
+    """A machine's H changed to NaN or < 0 after compiling is flagged as diverged at t = 0
+    (not run as an infinite bus); the unchanged model is not."""
+    from jaxgrid.simulate import simulate
+
+    model = compile_smib(tmp_path, "1 'GENCLS' 1 3.0 0.0 /\n")
+    group = model.machines[0]
+    changed = dataclasses.replace(model, machines=(group.replace(params={
+        **group.params, "h": np.full_like(group.params["h"], h)}),))
+    control, bad = (simulate(m, 0.02, 0.005, decimation=2) for m in (model, changed))
+    assert not bool(control.diverged)
+    assert bool(bad.diverged) and float(bad.diverged_at) == 0.0
