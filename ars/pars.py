@@ -229,7 +229,8 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
     def run(state: TrainState, tasks, data=None):
         n_tasks = int(jax.tree.leaves(tasks)[0].shape[0])
         if sample is None and m > n_tasks:
-            raise ValueError(f"tasks_per_iteration = {m}: only {n_tasks} tasks available")
+            raise ValueError(f"tasks_per_iteration = {m}: only {n_tasks} tasks available "
+                             "(lower ParsConfig.tasks_per_iteration, or pass more tasks)")
         # fresh inputs live on one device or the host: place them as the compiled function
         # returns the state, so the first and later calls share one compilation
         return compiled(*jax.device_put((state, tasks, data), replicated))

@@ -42,6 +42,7 @@ from experiments.studyargs import add_study_arguments, study_from_args
 # Hyper-parameter defaults of the plain command (the presets give the paper's per case).
 DEFAULTS = {"study": None, "policy": "lstm", "hidden": "32,32", "directions": 16, "top": 8,
             "decay": 0.99, "iterations": 200, "task_batch": None}
+TASKS_PER_ITERATION = 9  # m when --tasks-per-iteration is not given and the set has as many
 
 
 def parser(defaults: dict) -> argparse.ArgumentParser:
@@ -59,7 +60,9 @@ def parser(defaults: dict) -> argparse.ArgumentParser:
     p.add_argument("--step-size", type=float, default=1.0, help="α")
     p.add_argument("--noise", type=float, default=2.0, help="ν")
     p.add_argument("--decay", type=float, default=defaults["decay"], help="ε")
-    p.add_argument("--tasks-per-iteration", type=int, default=9, help="m")
+    p.add_argument("--tasks-per-iteration", type=int,
+                   help=f"m (default {TASKS_PER_ITERATION}, or every task of the set if it "
+                        "has fewer)")
     p.add_argument("--task-batch", type=int, default=defaults["task_batch"],
                    help="tasks whose rollouts run as one batch (default all m); batches run "
                         "one after another and stop once all their episodes are done")
@@ -153,16 +156,16 @@ def _train(args) -> int:
     from jaxgrid.study import write_study
 
     hidden = tuple(int(h) for h in str(args.hidden).split(",") if h.strip())
-    config = ParsConfig(directions=args.directions, top=args.top, step_size=args.step_size,
-                        noise=args.noise, decay=args.decay,
-                        tasks_per_iteration=args.tasks_per_iteration,
-                        task_batch=args.task_batch, seed=args.seed)
     if args.iterations < 1 or args.checkpoint_every < 1 or (args.seeds or 1) < 1:
         raise ValueError("--iterations, --checkpoint-every and --seeds must be >= 1")
     out = Path(args.out)
     saved_study = out / "study.toml"
     study = study_from_args(args, str(saved_study) if args.resume and saved_study.is_file()
                             else None)
+    config = ParsConfig(directions=args.directions, top=args.top, step_size=args.step_size,
+                        noise=args.noise, decay=args.decay,
+                        tasks_per_iteration=tasks_per_iteration(args, study),
+                        task_batch=args.task_batch, seed=args.seed)
     out.mkdir(parents=True, exist_ok=True)
     mgr = checkpoint.manager(out / "checkpoints", args.checkpoint_every)
     if not args.resume and mgr.latest_step() is not None:
@@ -200,34 +203,48 @@ def _train(args) -> int:
     rollouts = log[-1]["rollouts"] if log else 0
     device = device_label(jax.device_count())
     bar = tqdm(total=args.iterations, initial=done, unit="it", disable=not primary)
-    while done < args.iterations:
-        start = time.perf_counter()
-        state, metrics = trainer.iteration(state, trainer.tasks, trainer.data)
-        metrics = jax.device_get(metrics)
-        wall = time.perf_counter() - start
-        done, rollouts = done + 1, rollouts + int(np.ravel(metrics["rollouts"])[0])
-        row = {"iteration": done, "reward_mean": np.asarray(metrics["reward_mean"]).tolist(),
-               "reward_max": np.asarray(metrics["reward_max"]).tolist(),
-               "wall_s": round(wall, 3), "rollouts": rollouts, "device": device}
-        log.append(row)
-        if primary:
-            with open(metrics_path, "a") as metrics_file:
-                metrics_file.write(json.dumps(row) + "\n")
-        bar.set_postfix(mean=f"{np.mean(row['reward_mean']):.1f}",
-                        best=f"{np.max(row['reward_max']):.1f}", s_per_it=f"{wall:.2f}")
-        bar.update(1)
-        last = done == args.iterations
-        checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last, step=done)
-        if primary and (done % args.checkpoint_every == 0 or last):
-            _save_policies(out / "policies" / f"{done:05d}", trainer.spec, state, run_info,
-                           args.seeds)
-    bar.close()
+    try:  # closing the bar ends its line, so an error starts on a new one
+        while done < args.iterations:
+            start = time.perf_counter()
+            state, metrics = trainer.iteration(state, trainer.tasks, trainer.data)
+            metrics = jax.device_get(metrics)
+            wall = time.perf_counter() - start
+            done, rollouts = done + 1, rollouts + int(np.ravel(metrics["rollouts"])[0])
+            row = {"iteration": done, "reward_mean": np.asarray(metrics["reward_mean"]).tolist(),
+                   "reward_max": np.asarray(metrics["reward_max"]).tolist(),
+                   "wall_s": round(wall, 3), "rollouts": rollouts, "device": device}
+            log.append(row)
+            if primary:
+                with open(metrics_path, "a") as metrics_file:
+                    metrics_file.write(json.dumps(row) + "\n")
+            bar.set_postfix(mean=f"{np.mean(row['reward_mean']):.1f}",
+                            best=f"{np.max(row['reward_max']):.1f}", s_per_it=f"{wall:.2f}")
+            bar.update(1)
+            last = done == args.iterations
+            checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last, step=done)
+            if primary and (done % args.checkpoint_every == 0 or last):
+                _save_policies(out / "policies" / f"{done:05d}", trainer.spec, state, run_info,
+                               args.seeds)
+    finally:
+        bar.close()
     if primary:
         _save_policies(out / "policy", trainer.spec, state, run_info, args.seeds)
         _learning_curve(log, out / "learning_curve.png", study.name)
         print(f"{out}: {done} iterations, last mean reward "
               f"{np.mean(log[-1]['reward_mean']):.1f}, policy in {out / 'policy'}")
     return 0
+
+
+def tasks_per_iteration(args, study) -> int:
+    """m: --tasks-per-iteration, by default TASKS_PER_ITERATION or the whole task set if it is
+    smaller; ValueError naming the flag when uniform sampling asks for more than the set has."""
+    available = len(study.tasks(args.task_set))
+    m = args.tasks_per_iteration or min(TASKS_PER_ITERATION, available)
+    if args.task_sampling == "uniform" and m > available:
+        raise ValueError(f"--tasks-per-iteration {m}: the task set {args.task_set!r} of study "
+                         f"{study.name!r} has {available} tasks; pass --tasks-per-iteration "
+                         f"{available} or fewer, or another --task-set")
+    return m
 
 
 def _save_policies(folder: Path, spec, state, run_info: dict, seeds: int | None) -> None:

@@ -160,3 +160,41 @@ def test_the_300_bus_gridpack_files_train_from_their_own_files(shared_cases, tmp
     assert saved["spec"]["kind"] == "lstm" and saved["study"] == \
         "IEEE300_FIDVR_LoadShedding_Continuous_Action"
     assert len(saved["layout"]["observed_buses"]) == 142 == saved["spec"]["obs_size"] - 34
+
+
+def test_tasks_per_iteration_fits_the_set_or_names_the_flag():
+    """By default m is 9 or the whole set if smaller; asking for more than the set has names
+    --tasks-per-iteration."""
+    from types import SimpleNamespace
+
+    from experiments.train import tasks_per_iteration
+
+    study = SimpleNamespace(name="two_raws", tasks=lambda name: [None] * 6)
+
+    def args(m=None, sampling="uniform"):
+        return SimpleNamespace(tasks_per_iteration=m, task_set="train", task_sampling=sampling)
+
+    assert tasks_per_iteration(args(), study) == 6
+    assert tasks_per_iteration(args(4), study) == 4
+    with pytest.raises(ValueError, match=r"--tasks-per-iteration 9: the task set 'train' of "
+                                         r"study 'two_raws' has 6 tasks; pass "
+                                         r"--tasks-per-iteration 6 or fewer"):
+        tasks_per_iteration(args(9), study)
+
+
+def test_a_training_error_starts_on_a_new_line(tmp_path, capsys, monkeypatch):
+    """An error in an iteration closes the progress bar first, so the message has its own
+    line."""
+    import experiments.train as train
+
+    build = train.build
+
+    def failing_build(*args, **kwargs):
+        def fail(state, tasks, data):
+            raise ValueError("broken iteration")
+        return build(*args, **kwargs)._replace(iteration=fail)
+
+    monkeypatch.setattr(train, "build", failing_build)
+    assert main(TINY + ["--iterations", "2", "--out", str(tmp_path)], DEFAULTS) == 2
+    err = capsys.readouterr().err
+    assert "\nerror: broken iteration" in err, err
