@@ -324,7 +324,8 @@ def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: f
 
 
 def _samples(t_end: float, dt: float, decimation: int) -> int:
-    DT.check("dt", dt)
+    if DT.problem(dt):
+        raise ValueError(f"dt = {dt!r} s: allowed range is {DT} (2-5 ms is usual)")
     if not isinstance(decimation, int) or decimation < 1:
         raise ValueError(f"decimation = {decimation!r}: must be an int >= 1")
     Range(0.0, 3600.0, "s", lo_open=True).check("t_end", t_end)
