@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 
-.PHONY: install run test bench reproduce clean
+.PHONY: install run test bench reproduce reproduce-pnnl39 reproduce-pnnl300 clean
 
 install:  ## create .venv and install the project with its test extras
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +33,14 @@ bench:  ## benchmarks; figures go to bench_results/*.json
 reproduce:  ## the paper's 39-bus figures and tables, REPORT.md in results/reproduce39
 	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.reproduce \
 		--study ieee39_fidvr --out results/reproduce39
+
+reproduce-pnnl39:  ## the paper's settings on the PNNL 39-bus study, REPORT.md in results/pnnl39
+	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.reproduce \
+		--study studies/ieee39_pnnl.toml --out results/pnnl39
+
+reproduce-pnnl300:  ## the paper's settings on the PNNL 300-bus study, results/pnnl300
+	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.reproduce \
+		--study studies/ieee300_pnnl.toml --out results/pnnl300
 
 clean:
 	rm -rf $(VENV) results bench_results .pytest_cache

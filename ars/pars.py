@@ -220,6 +220,8 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
                          noise=state.noise * config.decay)
         metrics = {"reward_mean": returns.mean(), "reward_max": returns.max(),
                    "rollouts": jnp.asarray(2 * n_dir * m)}
+        if "steps" in out:  # environment steps simulated: failed episodes stop early
+            metrics["env_steps"] = out["steps"].sum()
         return new, metrics
 
     replicated = NamedSharding(mesh, PartitionSpec())

@@ -4,14 +4,18 @@
         [--batch 1024] [--calls 200] [--mpc "horizon=1,iterations=10"] [--mpc-batch 32]
         [--out bench_results/latency.json]
 
-For each study, the PARS policies (linear and FNN on 10 stacked observations, LSTM on one,
-widths of the training presets) with their observation normaliser, the UVLS relays and the
-MPC (`baselines.mpc`, options --mpc): the median wall time of one jitted decision for one
+For each study, the PARS policies (each kind on the observations the study stacks for it,
+`Study.history`; widths of the paper's preset for the grid's size,
+`experiments.train.paper_preset`) with their observation normaliser, or given trained
+policies (`bench_study(..., policies=)`, as `experiments.reproduce`'s tab3), the UVLS
+relays and the MPC (`baselines.mpc`, options --mpc): the median wall time of one jitted
+decision for one
 task (batch 1, result on the host), and the time per decision when a batch of tasks decides
 at once (one vmapped call / batch; --mpc-batch for the MPC). The MPC decides from the state
 0.3 s after the start of the study's first test fault, the policies from a constant
 observation. The paper's Table III reports 0.72 s per PARS decision and 63.31 s per MPC
-decision. Compile time is excluded; θ is random (the cost does not depend on its values).
+decision. Compile time is excluded; θ is random unless trained policies are given (the cost
+does not depend on its values).
 """
 from __future__ import annotations
 
@@ -27,11 +31,9 @@ from ars.policies import Policy, PolicySpec
 from baselines.mpc import mpc_controller, parse_options
 from baselines.uvls import uvls_policy
 from experiments.bench_sim import write_report
+from experiments.train import paper_preset
 from jaxgrid.env import PlanInputs
 from jaxgrid.study import load_study
-
-WIDTHS = {"ieee39_fidvr": (32, 32), "ieee300_fidvr": (64, 64)}  # the training presets
-HISTORY = {"linear": 10, "fnn": 10, "lstm": 1}  # as the study trains them
 
 
 def _median_call(fn, args, calls: int) -> float:
@@ -44,21 +46,30 @@ def _median_call(fn, args, calls: int) -> float:
     return statistics.median(times)
 
 
-def _controllers(study, name: str):
-    """[(label, env, policy_apply, params, carry)] of the study's controllers."""
+def _controllers(study):
+    """[(label, env, policy_apply, params, carry)] of random-θ PARS policies of each kind."""
     out = []
-    for kind, history in HISTORY.items():
+    widths = tuple(int(h) for h in paper_preset(study)["hidden"].split(","))
+    for kind in ("linear", "fnn", "lstm"):
+        history = study.history(kind)
         env = study.env(history=history)
-        hidden = () if kind == "linear" else WIDTHS.get(name, (32, 32))
+        hidden = () if kind == "linear" else widths
         spec = PolicySpec(kind, history * env.obs_size, len(env.action_slots), hidden)
         policy = Policy(spec)
         theta = 0.1 * jax.random.normal(jax.random.PRNGKey(0), (policy.size,))
         params = (theta, jnp.zeros(spec.obs_size), jnp.ones(spec.obs_size))
         label = f"pars_{kind}" + (f"_{'x'.join(map(str, hidden))}" if hidden else "")
         out.append((label, env, normalized_policy(policy), params, initial_carry(policy)))
-    env = study.env()
-    out.append(("uvls", env, *uvls_policy(env)))
     return out
+
+
+def _saved_controllers(study, policies: dict):
+    """[(label, env, policy_apply, params, carry)] of saved PARS policies {label: folder},
+    each observing as it was trained (`experiments.evaluate.controlled_env`)."""
+    from experiments.evaluate import controlled_env
+
+    return [(label, *controlled_env(study, f"policy:{folder}"))
+            for label, folder in policies.items()]
 
 
 def mpc_row(study, options: str, batch: int, calls: int) -> dict:
@@ -83,10 +94,16 @@ def mpc_row(study, options: str, batch: int, calls: int) -> dict:
             "per_decision_in_batch_us": round(1e6 * batched / batch, 1)}
 
 
-def bench_study(name: str, batch: int, calls: int, mpc: str, mpc_batch: int) -> dict:
+def bench_study(name: str, batch: int, calls: int, mpc: str, mpc_batch: int,
+                policies: dict | None = None) -> dict:
+    """Latency rows of the study `name`'s controllers: random-θ PARS policies, or the
+    trained `policies` {label: folder}, then UVLS and the MPC."""
     study = load_study(name)
     rows = []
-    for label, env, apply, params, carry in _controllers(study, name):
+    pars = _saved_controllers(study, policies) if policies else _controllers(study)
+    uvls_env = study.env()
+    for label, env, apply, params, carry in [*pars, ("uvls", uvls_env,
+                                                     *uvls_policy(uvls_env))]:
         obs = jnp.ones(env.config.history * env.obs_size)
         one = jax.jit(apply)
         many = jax.jit(jax.vmap(apply, in_axes=(None, 0, 0)))

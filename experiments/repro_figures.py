@@ -4,13 +4,16 @@ Each experiment takes the `Runs` of a reproduction, gets the runs it needs from 
 writes its figure `OUT/<id>.png`, and returns its numbers: {"numbers": {quantity: ours},
 "settings": what ran}. `PAPER` holds, per experiment, its title, the paper's case and
 settings, and the paper's values for the same quantities (from the paper's text, figures
-and tables; "≈" marks values read off a figure).
+and tables; "≈" marks values read off a figure). The side claims are computed by
+`experiments.repro_claims`. `generalisation` is not in the paper: the main policy against
+UVLS on the operating points it never trained on (the study's "generalisation" task set).
 """
 from __future__ import annotations
 
 import jax
 import numpy as np
 
+from experiments import repro_claims as claims
 from experiments.repro_runs import Runs, convergence_iteration, metrics_rows
 from experiments.train import smoothed
 
@@ -31,7 +34,9 @@ PAPER = {
              "values": {"speed-up, largest against smallest": "136× (1152 vs 3 cores)"}},
     "fig8": {"title": "39-bus case study: fault at bus 3, 0.08 s; bus-4 voltage, MW shed",
              "case": "IEEE 39-bus", "settings": "fault at bus 3 for 0.08 s",
-             "values": {"reward, PARS": -94.09, "reward, UVLS": -2367.21}},
+             "values": {"reward, PARS": -94.09, "reward, UVLS": -2367.21,
+                        "PARS better than UVLS on tasks that need shedding (test set)": "all",
+                        "tasks that need shedding where PARS is not better": "none"}},
     "fig9": {"title": "LSTM learning curves with N = 32, 64, 128 directions",
              "case": "IEEE 300-bus", "settings": "b = N/2",
              "values": {"note": "more directions learn faster and better"}},
@@ -43,14 +48,26 @@ PAPER = {
               "case": "IEEE 300-bus", "settings": "170 test tasks",
               "values": {"PARS better than UVLS on": "98.82 %",
                          "PARS better than MPC on": "comparable",
-                         "PARS better than PPO on": "95.29 %"}},
+                         "PARS better than PPO on": "95.29 %",
+                         "PARS − UVLS more than M on": "> 50 %",
+                         "PARS − PPO less than M/2 on": "≈ 85 %",
+                         "M (failure penalty)": 10000,
+                         "PPO fails on": "3 of 170",
+                         "mean reward, PARS − MPC": "comparable"}},
     "tab3": {"title": "Decision time per control step", "case": "IEEE 300-bus",
              "settings": "PARS policy vs trajectory-sensitivity MPC",
              "values": {"PARS LSTM, s per decision": 0.72, "MPC, s per decision": 63.31}},
+    "generalisation": {"title": "The trained policy against UVLS on operating points it never "
+                                "trained on",
+                       "case": "not in the paper", "settings": "-",
+                       "values": {"note": "the paper claims generalisation to unseen "
+                                          "scenarios, without this measurement"}},
     "fig13": {"title": "300-bus case study: fault at bus 23, 0.1 s; bus-33 voltage, MW shed",
               "case": "IEEE 300-bus", "settings": "fault at bus 23 for 0.1 s",
               "values": {"reward, PARS": -823.6, "reward, MPC": -876.6, "reward, PPO": -927.3,
-                         "reward, UVLS": -21901.8}},
+                         "reward, UVLS": -21901.8, "buses not recovered, UVLS": 5,
+                         "buses not recovered, PARS": 0, "buses not recovered, MPC": 0,
+                         "buses not recovered, PPO": 0, "sheds the least": "PARS"}},
 }
 
 
@@ -101,12 +118,13 @@ def _curves(runs: Runs, configs: list[tuple[str, int, str]], title: str, path) -
 
 
 def fig6a(runs: Runs, path) -> dict:
-    n = runs.settings.directions
+    n = runs.directions
     numbers = _curves(runs, [(kind, n, kind) for kind in ("linear", "fnn", "lstm")],
                       f"PARS policies, N = {n}", path)
+    history = ", ".join(f"{k} {runs.study.history(k)}" for k in ("linear", "fnn", "lstm"))
     return {"numbers": numbers, "settings": f"N = {n}, b = {max(1, n // 2)}, "
             f"m = {runs.settings.tasks_per_iteration}, {_seeds(runs.settings.seeds)}, "
-            f"{runs.settings.iterations} iterations"}
+            f"{runs.settings.iterations} iterations, observations stacked: {history}"}
 
 
 def _sweep(runs: Runs, sweep, path) -> dict:
@@ -155,7 +173,7 @@ def fig7(runs: Runs, path) -> dict:
     numbers = {f"s per iteration, {k}": round(v, 3) for k, v in seconds.items()}
     numbers.update({f"speed-up, {k}": round(base / v, 2) for k, v in seconds.items()})
     s = runs.settings
-    return {"numbers": numbers, "settings": f"LSTM, N = {s.directions}, m = "
+    return {"numbers": numbers, "settings": f"LSTM, N = {runs.directions}, m = "
             f"{s.tasks_per_iteration}, median of {s.timing_iterations} iterations"}
 
 
@@ -193,23 +211,26 @@ def _case_study(runs: Runs, path, controllers: dict, fault_bus: int, duration: f
             + ", ".join(f"{k} {v}" for k, v in controllers.items())}
 
 
-def _pars_policy(runs: Runs, directions: int) -> str:
-    """The given PARS policy, or the best seed of the LSTM run with N = directions."""
-    if runs.settings.policy:
-        return f"policy:{runs.settings.policy}"
-    return runs.best_seed(runs.pars("lstm", directions))
-
-
 def fig8(runs: Runs, path) -> dict:
-    policy = _pars_policy(runs, runs.settings.directions)
-    return _case_study(runs, path, {"PARS": policy, "UVLS": "uvls"}, 3, 0.08, 4)
+    """The bus-3 case study, and the 39-bus claim on the test set: PARS beats UVLS on every
+    task that needs shedding (fails without control), or the tasks where it does not."""
+    policy = runs.main_policy()
+    result = _case_study(runs, path, {"PARS": policy, "UVLS": "uvls"}, 3, 0.08, 4)
+    wins = claims.shedding_wins(runs.evaluation("none"), runs.evaluation(policy),
+                                runs.evaluation("uvls"))
+    result["numbers"].update({
+        "PARS better than UVLS on tasks that need shedding (test set)":
+            wins["better on tasks that need shedding"],
+        "tasks that need shedding where PARS is not better":
+            "; ".join(wins["not better on"]) or "none"})
+    return result
 
 
 def _ppo_policy(runs: Runs) -> str:
-    """The given PPO policy, or that of the first PPO training."""
+    """The given PPO policy, or the best of the `ppo_seeds` PPO trainings."""
     if runs.settings.ppo_policy:
         return f"ppo:{runs.settings.ppo_policy}"
-    return f"ppo:{runs.ppo(0, _ppo_steps(runs)) / 'policy'}"
+    return runs.best_ppo(_ppo_steps(runs))
 
 
 def _ppo_steps(runs: Runs) -> int:
@@ -218,30 +239,41 @@ def _ppo_steps(runs: Runs) -> int:
     if s.ppo_env_steps is not None:
         return s.ppo_env_steps
     steps = int(round(runs.study.config.episode / runs.study.config.agent_dt))
-    return s.iterations * 2 * s.directions * s.tasks_per_iteration * steps
+    return s.iterations * 2 * runs.directions * s.tasks_per_iteration * steps
 
 
 def fig13(runs: Runs, path) -> dict:
-    policy = _pars_policy(runs, max(runs.settings.sweep_large))
-    return _case_study(runs, path, {"PARS": policy, "MPC": "mpc", "PPO": _ppo_policy(runs),
-                                    "UVLS": "uvls"}, 23, 0.1, 33)
+    """The bus-23 case study: rewards, MW shed, who sheds least, and how many observed buses
+    each controller leaves below the recovery level (the paper: five under UVLS)."""
+    controllers = {"PARS": runs.main_policy(), "MPC": "mpc", "PPO": _ppo_policy(runs),
+                   "UVLS": "uvls"}
+    result = _case_study(runs, path, controllers, 23, 0.1, 33)
+    level = runs.study.params.recovery_level
+    for label, spec in controllers.items():
+        result["numbers"][f"buses not recovered, {label}"] = len(
+            claims.buses_not_recovered(runs.trace(spec, 23, 0.1), level))
+    shed = {label: result["numbers"][f"MW shed, {label}"] for label in controllers}
+    result["numbers"]["sheds the least"] = ", ".join(
+        label for label, mw in shed.items() if mw == min(shed.values()))  # ties: all
+    return result
 
 
 def fig10_11(runs: Runs, path) -> dict:
-    """Training reward of PARS (fig6a's LSTM run, every seed: mean over its perturbed
+    """Training reward of PARS (the main LSTM run, every seed: mean over its perturbed
     rollouts) and PPO (`ppo_seeds` runs: mean return of the episodes each chunk ended)
-    against wall time and environment steps."""
+    against wall time and environment steps (PARS: the agent steps its episodes simulated,
+    mean over seeds; a failed episode stops early)."""
     plt = _plt()
     s = runs.settings
-    steps = int(round(runs.study.config.episode / runs.study.config.agent_dt))
-    pars = runs.pars_curves(runs.pars("lstm", s.directions))
-    ppo_rows = [metrics_rows(runs.ppo(seed, _ppo_steps(runs)) / "metrics.jsonl") for seed in range(s.ppo_seeds)]
+    pars = runs.pars_curves(runs.pars("lstm", runs.directions))
+    ppo_rows = [metrics_rows(runs.ppo(seed, _ppo_steps(runs)) / "metrics.jsonl")
+                for seed in range(s.ppo_seeds)]
     n = min(len(rows) for rows in ppo_rows)
     ppo_reward = np.array([[r["reward_train"] if r["reward_train"] is not None else np.nan
                             for r in rows[:n]] for rows in ppo_rows], float)
     ppo_wall = np.mean([[r["wall_total_s"] for r in rows[:n]] for rows in ppo_rows], 0)
     ppo_steps = np.array([r["env_steps"] for r in ppo_rows[0][:n]])
-    curves = {"PARS": (pars["wall_s"], pars["episodes"] * steps, pars["reward"]),
+    curves = {"PARS": (pars["wall_s"], pars["env_steps"].mean(0), pars["reward"]),
               "PPO": (ppo_wall, ppo_steps, ppo_reward)}
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     numbers = {}
@@ -273,45 +305,73 @@ def fig10_11(runs: Runs, path) -> dict:
         ax.legend(fontsize=8)
     fig.suptitle(f"PARS vs PPO on {runs.study.name}")
     _save(fig, path)
-    return {"numbers": numbers, "settings": f"PARS LSTM N = {s.directions}, "
+    numbers["environment steps, PARS (mean over seeds)"] = int(curves["PARS"][1][-1])
+    numbers["environment steps, PPO"] = int(ppo_steps[-1])
+    return {"numbers": numbers, "settings": f"PARS LSTM N = {runs.directions}, "
             f"{s.iterations} iterations × {_seeds(s.seeds)} in one program; PPO {s.ppo_seeds} "
             f"seeds × {_ppo_steps(runs)} env steps (Table II settings), one after another"}
 
 
 def fig12(runs: Runs, path) -> dict:
+    """Per-task reward differences on the test set and the paper's side claims: shares of
+    tasks PARS wins, PARS − UVLS more than M, PARS − PPO less than M/2 (M the failure
+    penalty), the tasks each controller fails, PARS's mean reward against MPC's."""
     plt = _plt()
-    pars = runs.evaluation(_pars_policy(runs, max(runs.settings.sweep_large)))
+    pars = runs.evaluation(runs.main_policy())
     others = {"UVLS": runs.evaluation("uvls"), "MPC": runs.evaluation("mpc"),
               "PPO": runs.evaluation(_ppo_policy(runs))}
-    ours = np.array([t["reward"] for t in pars["tasks"]])
+    penalty = abs(runs.study.params.unstable_penalty)
+    thresholds = {"UVLS": {"more_than": penalty}, "PPO": {"less_than": penalty / 2}}
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
-    numbers = {"test tasks": len(ours)}
+    numbers = {"test tasks": len(pars["tasks"]), "M (failure penalty)": penalty}
     for ax, (label, result) in zip(axes, others.items()):
-        difference = ours - np.array([t["reward"] for t in result["tasks"]])
-        better = float(np.mean(difference > 0))
-        numbers[f"PARS better than {label} on"] = f"{100 * better:.2f} %"
-        numbers[f"PARS at least as good as {label} on"] = (
-            f"{100 * float(np.mean(difference >= 0)):.2f} %")
+        shares = claims.difference_shares(pars, result, **thresholds.get(label, {}))
+        numbers[f"PARS better than {label} on"] = shares["better"]
+        numbers[f"PARS at least as good as {label} on"] = shares["at least as good"]
+        if "more than" in shares:
+            numbers[f"PARS − {label} more than M on"] = shares["more than"]
+        if "less than" in shares:
+            numbers[f"PARS − {label} less than M/2 on"] = shares["less than"]
+        numbers[f"{label} fails on"] = claims.failures(result)
         numbers[f"mean reward, {label}"] = round(result["summary"]["mean_reward"], 1)
-        ax.hist(difference, bins=20)
+        ours, theirs = claims.paired_rewards(pars, result)
+        ax.hist(ours - theirs, bins=20)
         ax.axvline(0, color="k", lw=1)
-        ax.set_title(f"PARS − {label}: PARS better on {100 * better:.1f} %")
+        ax.set_title(f"PARS − {label}: PARS better on {shares['better']}")
         ax.set_xlabel("reward difference per task")
+    numbers["PARS fails on"] = claims.failures(pars)
     numbers["mean reward, PARS"] = round(pars["summary"]["mean_reward"], 1)
+    numbers["mean reward, PARS − MPC"] = round(numbers["mean reward, PARS"]
+                                               - numbers["mean reward, MPC"], 1)
     axes[0].set_ylabel("test tasks")
     _save(fig, path)
-    return {"numbers": numbers, "settings": f"{len(ours)} test tasks of {runs.study.name}; "
-            f"PARS {pars['controller']}, PPO {others['PPO']['controller']}"}
+    return {"numbers": numbers, "settings": f"{len(pars['tasks'])} test tasks of "
+            f"{runs.study.name}; PARS {pars['controller']}, PPO (best of "
+            f"{runs.settings.ppo_seeds} seeds) {others['PPO']['controller']}"}
+
+
+def _trained_policies(runs: Runs) -> dict:
+    """{label: policy folder}: the main LSTM policy, and fig6a's linear and FNN ones (best
+    seeds) where those trainings are finished."""
+    lstm = runs.main_policy().removeprefix("policy:")
+    policies = {}
+    for kind in ("linear", "fnn"):
+        folder = runs.pars_folder(kind, runs.directions)
+        if runs.pars_finished(folder):
+            policies[f"pars_{kind}"] = str(runs.best_seed_folder(folder))
+    return {**policies, "pars_lstm": lstm}
 
 
 def tab3(runs: Runs, path) -> dict:
-    """Decision latency of the PARS policies and the MPC (`experiments.bench_latency`)."""
+    """Decision latency of the trained PARS policies (their own widths and inputs), UVLS and
+    the MPC (`experiments.bench_latency`)."""
     from experiments.bench_latency import bench_study
 
     plt = _plt()
     s = runs.settings
+    policies = _trained_policies(runs)
     rows = bench_study(str(runs.study_file), batch=8, calls=s.latency_calls, mpc=s.mpc,
-                       mpc_batch=2)["controllers"]
+                       mpc_batch=2, policies=policies)["controllers"]
     fig, ax = plt.subplots(figsize=(7, 3.5))
     labels = [r["controller"] for r in rows]
     ax.barh(labels, [r["one_task_ms"] / 1e3 for r in rows])
@@ -326,9 +386,48 @@ def tab3(runs: Runs, path) -> dict:
                "MPC, s per decision": float(f"{mpc['one_task_ms'] / 1e3:.3g}")}
     numbers.update({f"{k}, ms per decision (one task)": v["one_task_ms"]
                     for k, v in by_label.items()})
-    return {"numbers": numbers, "settings": f"one task, median of {s.latency_calls} calls "
-            f"on {jax.devices()[0].platform}; MPC options {s.mpc or 'defaults'}"}
+    return {"numbers": numbers, "settings": f"trained policies {policies}; one task, median "
+            f"of {s.latency_calls} calls on {jax.devices()[0].platform}; MPC options "
+            f"{s.mpc or 'defaults'}"}
+
+
+def generalisation(runs: Runs, path) -> dict:
+    """The main policy against UVLS on the study's "generalisation" task set (operating
+    points it never trained on): the share of tasks it wins, overall and per point."""
+    if "generalisation" not in runs.study.definition.tasks:
+        raise NotApplicable(f"study {runs.study.name!r} has no [tasks.generalisation] set")
+    plt = _plt()
+    pars = runs.evaluation(runs.main_policy(), "generalisation")
+    uvls = runs.evaluation("uvls", "generalisation")
+    shares = claims.difference_shares(pars, uvls)
+    ours, theirs = claims.paired_rewards(pars, uvls)
+    labels = [t["operating_point"] for t in pars["tasks"]]
+    points = list(dict.fromkeys(labels))
+    per_point = {p: float(np.mean([o > u for o, u, q in zip(ours, theirs, labels) if q == p]))
+                 for p in points}
+    fig, ax = plt.subplots(figsize=(8, 0.35 * len(points) + 1.5))
+    ax.barh(points, [100 * v for v in per_point.values()])
+    ax.set_xlim(0, 100)
+    ax.set_xlabel("tasks where PARS earns more than UVLS (%)")
+    ax.set_title(f"{runs.study.name}: PARS against UVLS on untrained operating points")
+    ax.tick_params(axis="y", labelsize=7)
+    _save(fig, path)
+    numbers = {"tasks": len(ours), "operating points": len(points),
+               "PARS better than UVLS on": shares["better"],
+               "PARS at least as good as UVLS on": shares["at least as good"],
+               "PARS fails on": claims.failures(pars), "UVLS fails on": claims.failures(uvls),
+               "mean reward, PARS": round(float(ours.mean()), 1),
+               "mean reward, UVLS": round(float(theirs.mean()), 1)}
+    numbers.update({f"PARS better than UVLS at {p}": claims.percent(v)
+                    for p, v in per_point.items()})
+    return {"numbers": numbers, "settings": f"{len(ours)} tasks of the generalisation set "
+            f"of {runs.study.name} (points {points}); PARS {pars['controller']}"}
+
+
+class NotApplicable(Exception):
+    """An experiment the study cannot run (it lacks what the experiment needs)."""
 
 
 EXPERIMENTS = {"fig6a": fig6a, "fig6b": fig6b, "fig7": fig7, "fig8": fig8, "fig9": fig9,
-               "fig10_11": fig10_11, "fig12": fig12, "tab3": tab3, "fig13": fig13}
+               "fig10_11": fig10_11, "fig12": fig12, "tab3": tab3, "fig13": fig13,
+               "generalisation": generalisation}

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.train import SMOOTHING, smoothed
+from experiments.repro_claims import best_ppo_seed
+from experiments.train import SMOOTHING, paper_preset, smoothed
 from jaxgrid.study import Study, load_study, write_study
-from jaxgrid.tasks import TaskSet
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -32,14 +32,19 @@ class Settings:
     """How large the experiments are (FULL: the paper's settings; QUICK: a pipeline check).
 
     Attributes:
-      iterations: PARS iterations per training.  seeds: PARS seeds per configuration.
-      directions: N of fig6a.  sweep: N of fig6b.  sweep_large: N of fig9.
+      iterations: PARS iterations per training (the paper: 500).  seeds: PARS seeds per
+        configuration.
+      directions: N of the study's main policy (fig6a, fig7, fig8, fig10_11, fig12, tab3,
+        fig13, generalisation), None for the paper's (`experiments.train.paper_preset`:
+        16 on the 39-bus, 128 on the 300-bus).  sweep: N of fig6b.  sweep_large: N of fig9.
       tasks_per_iteration: m.  episode: s, None for the study's (the study written to
         OUT/study.toml carries it, so every run uses it).
       test_tasks: test faults per (operating point, duration) kept, None for all; durations
-        kept: test_durations (None for all).
-      ppo_seeds: PPO trainings.  ppo_env_steps: per PPO training, None for as many as one
-        PARS training (iterations × 2N·m episodes × agent steps).  ppo_flags: extra flags.
+        kept: test_durations (None for all); both apply to the generalisation set too.
+      ppo_seeds: PPO trainings (the best one is fig12's and fig13's).  ppo_env_steps: per
+        PPO training, None for as many as one PARS training could take (iterations × 2N·m
+        episodes × agent steps; failed episodes stop early, so PARS takes fewer).
+      ppo_flags: extra flags.
       mpc: MPC options (`baselines.mpc.parse_options`).
       timing_iterations: iterations timed per device count (fig7).  processes: fig7's
         `jax.distributed` process count (0: none).
@@ -50,16 +55,16 @@ class Settings:
         1-device iteration time for this study and N = directions (None: none).
     """
 
-    iterations: int = 300
+    iterations: int = 500
     seeds: int = 5
-    directions: int = 16
+    directions: int | None = None
     sweep: tuple[int, ...] = (8, 16, 32, 64)
     sweep_large: tuple[int, ...] = (32, 64, 128)
     tasks_per_iteration: int = 9
     episode: float | None = None
     test_tasks: int | None = None
     test_durations: int | None = None
-    ppo_seeds: int = 3
+    ppo_seeds: int = 5
     ppo_env_steps: int | None = None
     ppo_flags: tuple[str, ...] = ()
     mpc: str = ""
@@ -81,10 +86,6 @@ QUICK = Settings(iterations=2, seeds=2, directions=2, sweep=(2, 4), sweep_large=
                  mpc="horizon=0.2,iterations=1,dt=0.02", timing_iterations=1, processes=0,
                  latency_calls=3, window=1)
 
-# The paper's PARS presets: the 39-bus one for studies up to 100 buses, else the 300-bus one.
-PRESETS = {"small": {"hidden": "32,32", "decay": 0.99}, "large": {"hidden": "64,64",
-                                                                   "decay": 0.996}}
-
 
 def _hash(value) -> str:
     return hashlib.sha1(json.dumps(value, sort_keys=True).encode()).hexdigest()[:10]
@@ -101,8 +102,8 @@ class Runs:
         self.study_file = self.out / "study.toml"
         write_study(self.study, self.study_file)
         self.study_key = _hash(self.study_file.read_text())
-        n_buses = len(self.study.points[0].case.buses.number)
-        self.preset = PRESETS["large" if n_buses > 100 else "small"]
+        self.preset = paper_preset(self.study)
+        self.directions = settings.directions or self.preset["directions"]
         self.trainings: set[Path] = set()  # PARS / PPO run folders used since last cleared
 
     def folder(self, kind: str, inputs: dict) -> Path:
@@ -113,19 +114,35 @@ class Runs:
         return folder
 
     # --- PARS ------------------------------------------------------------------------------
-    def pars(self, policy: str, directions: int) -> Path:
-        """A finished `settings.seeds`-seed PARS training (one program, `--seeds`) of `policy`
-        with N = directions, b = N/2 and the preset's widths and decay; its folder."""
+    def pars_flags(self, policy: str, directions: int) -> list[str]:
+        """`experiments.train` flags of a PARS training of `policy` with N = directions,
+        b = N/2, the preset's widths and decay, the study's history for the policy kind and
+        its task sampling, `settings.seeds` seeds in one program."""
         s = self.settings
-        flags = ["--policy", policy, "--hidden", "" if policy == "linear"
-                 else self.preset["hidden"], "--directions", str(directions),
-                 "--top", str(max(1, directions // 2)), "--decay", str(self.preset["decay"]),
-                 "--tasks-per-iteration", str(s.tasks_per_iteration),
-                 "--iterations", str(s.iterations), "--seeds", str(s.seeds)]
-        folder = self.folder(f"pars_{policy}_N{directions}", {"flags": flags})
+        return ["--policy", policy, "--hidden", "" if policy == "linear"
+                else self.preset["hidden"], "--directions", str(directions),
+                "--top", str(max(1, directions // 2)), "--decay", str(self.preset["decay"]),
+                "--history", str(self.study.history(policy)),
+                "--task-sampling", self.study.definition.training.task_sampling,
+                "--tasks-per-iteration", str(s.tasks_per_iteration),
+                "--iterations", str(s.iterations), "--seeds", str(s.seeds)]
+
+    def pars_folder(self, policy: str, directions: int) -> Path:
+        """The run folder of that PARS training (made, not trained)."""
+        flags = self.pars_flags(policy, directions)
+        return self.folder(f"pars_{policy}_N{directions}", {"flags": flags})
+
+    def pars_finished(self, folder: Path) -> bool:
         rows = metrics_rows(folder / "metrics.jsonl")
+        return bool(rows) and rows[-1]["iteration"] >= self.settings.iterations and (
+            folder / "policy").is_dir()
+
+    def pars(self, policy: str, directions: int) -> Path:
+        """A finished PARS training (`pars_flags`); its folder."""
+        folder = self.pars_folder(policy, directions)
+        flags = self.pars_flags(policy, directions)
         self.trainings.add(folder)
-        if rows and rows[-1]["iteration"] >= s.iterations and (folder / "policy").is_dir():
+        if self.pars_finished(folder):
             return folder
         from experiments.train import main as train
         resume = ["--resume"] if any((folder / "checkpoints").glob("[0-9]*")) else []
@@ -143,20 +160,45 @@ class Runs:
 
     def pars_curves(self, folder: Path) -> dict:
         """Per-seed learning curves of a PARS run: iteration (n,), reward (seeds, n) (mean over
-        the iteration's perturbed rollouts), wall_s (n,) cumulative, episodes (n,) per seed."""
+        the iteration's perturbed rollouts), wall_s (n,) cumulative, episodes (n,) per seed,
+        env_steps (seeds, n) cumulative agent steps simulated."""
         rows = metrics_rows(folder / "metrics.jsonl")
         return {"iteration": np.array([r["iteration"] for r in rows]),
                 "reward": np.array([r["reward_mean"] for r in rows], float).reshape(
                     len(rows), -1).T,
                 "wall_s": np.cumsum([r["wall_s"] for r in rows]),
-                "episodes": np.array([r["rollouts"] for r in rows])}
+                "episodes": np.array([r["rollouts"] for r in rows]),
+                "env_steps": np.array([r["env_steps"] for r in rows], float).reshape(
+                    len(rows), -1).T}
 
-    def best_seed(self, folder: Path) -> str:
-        """controller spec of the seed whose smoothed final training reward is highest."""
+    def best_seed_folder(self, folder: Path) -> Path:
+        """The policy folder of the seed whose smoothed final training reward is highest."""
         curves = self.pars_curves(folder)
         window = min(self.settings.window, curves["reward"].shape[1])
         final = smoothed(curves["reward"], window)[:, -1]
-        return f"policy:{folder / 'policy' / f'seed{int(np.argmax(final))}'}"
+        return folder / "policy" / f"seed{int(np.argmax(final))}"
+
+    def best_seed(self, folder: Path) -> str:
+        """controller spec of `best_seed_folder`."""
+        return f"policy:{self.best_seed_folder(folder)}"
+
+    def main_policy(self) -> str:
+        """The PARS controller of the case studies, fig12, tab3 and generalisation: the given
+        policy, or the best seed of the LSTM training with N = directions."""
+        if self.settings.policy:
+            return f"policy:{self.settings.policy}"
+        return self.best_seed(self.pars("lstm", self.directions))
+
+    def export_policy(self) -> Path | None:
+        """Copy the best seed of the finished main LSTM training to OUT/policy (loadable by
+        `experiments.evaluate --controller policy:OUT/policy`); None if it is not trained."""
+        folder = self.pars_folder("lstm", self.directions)
+        if not self.pars_finished(folder):
+            return None
+        target = self.out / "policy"
+        shutil.rmtree(target, ignore_errors=True)
+        shutil.copytree(self.best_seed_folder(folder), target)
+        return target
 
     # --- PPO -------------------------------------------------------------------------------
     def ppo(self, seed: int, env_steps: int) -> Path:
@@ -173,6 +215,12 @@ class Runs:
         if train_ppo(["--study", str(self.study_file), *flags, "--out", str(folder), *resume]):
             raise RuntimeError(f"PPO training in {folder} failed")
         return folder
+
+    def best_ppo(self, env_steps: int) -> str:
+        """controller spec of the best of the `ppo_seeds` PPO trainings (`best_ppo_seed`)."""
+        folders = [self.ppo(seed, env_steps) for seed in range(self.settings.ppo_seeds)]
+        best = best_ppo_seed([metrics_rows(f / "metrics.jsonl") for f in folders])
+        return f"ppo:{folders[best] / 'policy'}"
 
     # --- evaluations -----------------------------------------------------------------------
     def evaluation(self, control: str, tasks: str = "test") -> dict:
@@ -223,7 +271,7 @@ class Runs:
 
     # --- timing ----------------------------------------------------------------------------
     def iteration_seconds(self, devices: int) -> float:
-        """Median seconds of one LSTM PARS iteration (N = settings.directions, one seed) on a
+        """Median seconds of one LSTM PARS iteration (N = directions, one seed) on a
         mesh of the first `devices` CPU devices of this process, after its compile."""
         import jax
         from jax.sharding import Mesh
@@ -232,10 +280,11 @@ class Runs:
         from experiments.train import build
 
         s = self.settings
-        config = ParsConfig(directions=s.directions, top=max(1, s.directions // 2),
+        config = ParsConfig(directions=self.directions, top=max(1, self.directions // 2),
                             tasks_per_iteration=s.tasks_per_iteration)
         mesh = Mesh(np.array(jax.devices()[:devices]), ("batch",))
-        trainer = build(self.study, "lstm", _widths(self.preset["hidden"]), config, mesh=mesh)
+        trainer = build(self.study, "lstm", _widths(self.preset["hidden"]), config,
+                        mesh=mesh)
         state = init_state(trainer.policy, config)
         state, _ = jax.block_until_ready(trainer.iteration(state, trainer.tasks, trainer.data))
         times = []
@@ -254,10 +303,10 @@ class Runs:
         report = json.loads(path.read_text())
         rows = [r for case in report["cases"] if case["case"] == self.study.name
                 for r in case["runs"]
-                if r["directions"] == self.settings.directions and r["devices"] == 1]
+                if r["directions"] == self.directions and r["devices"] == 1]
         if report.get("backend") != "gpu" or not rows:
             raise ValueError(f"{path}: no GPU row for study {self.study.name!r} with N = "
-                             f"{self.settings.directions} on 1 device (backend "
+                             f"{self.directions} on 1 device (backend "
                              f"{report.get('backend')!r})")
         return f"1 {report['device_kind']} ({path.name})", rows[0]
 
@@ -267,15 +316,15 @@ class Runs:
         (`experiments.train --coordinator`); the first iteration (compile) is left out."""
         s = self.settings
         folder = self.folder("processes", {"processes": processes, "settings": [
-            s.directions, s.tasks_per_iteration, s.episode, s.timing_iterations]})
+            self.directions, s.tasks_per_iteration, s.episode, s.timing_iterations]})
         with socket.socket() as probe:
             probe.bind(("127.0.0.1", 0))
             port = probe.getsockname()[1]
         env = dict(os.environ, PYTHONPATH=str(REPO),
                    XLA_FLAGS="--xla_force_host_platform_device_count=1")
         flags = ["--study", str(self.study_file), "--policy", "lstm",
-                 "--hidden", self.preset["hidden"], "--directions", str(s.directions),
-                 "--top", str(max(1, s.directions // 2)),
+                 "--hidden", self.preset["hidden"], "--directions", str(self.directions),
+                 "--top", str(max(1, self.directions // 2)),
                  "--tasks-per-iteration", str(s.tasks_per_iteration),
                  "--iterations", str(s.timing_iterations + 1), "--checkpoint-every", "1000",
                  "--out", str(folder / "run"), "--coordinator", f"127.0.0.1:{port}",
@@ -308,16 +357,17 @@ def convergence_iteration(iterations: np.ndarray, reward: np.ndarray, window: in
 
 
 def _sized(study: Study, settings: Settings) -> Study:
-    """The study with the settings' episode length and test-set size."""
+    """The study with the settings' episode length and test and generalisation set sizes."""
     definition = study.definition
     env = (definition.env if settings.episode is None
            else dataclasses.replace(definition.env, episode=settings.episode))
     tasks = dict(definition.tasks)
-    if settings.test_tasks is not None or settings.test_durations is not None:
-        test = tasks["test"]
-        tasks["test"] = TaskSet(test.fault_buses[:settings.test_tasks],
-                                test.fault_durations[:settings.test_durations],
-                                test.fault_starts, test.operating_points)
+    for name in ("test", "generalisation"):
+        if name in tasks:
+            kept = tasks[name]
+            tasks[name] = dataclasses.replace(
+                kept, fault_buses=kept.fault_buses[:settings.test_tasks],
+                fault_durations=kept.fault_durations[:settings.test_durations])
     return dataclasses.replace(study, definition=dataclasses.replace(
         definition, env=env, tasks=tasks))
 

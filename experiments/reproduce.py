@@ -2,7 +2,10 @@
 
     python -m experiments.reproduce --study ieee39_fidvr|FILE.toml --out results/repro39 \
         [--only fig6a,fig8,...] [--quick] [--iterations N] [--seeds K] [--ppo-seeds K]
-        [--policy DIR/policy] [--ppo-policy DIR/policy] [--gpu-timing BENCH.json]
+        [--directions N] [--policy DIR/policy] [--ppo-policy DIR/policy]
+        [--gpu-timing BENCH.json]
+    python -m experiments.reproduce --study studies/ieee39_pnnl.toml --out results/pnnl39
+    python -m experiments.reproduce --study studies/ieee300_pnnl.toml --out results/pnnl300
     make reproduce
 
 Experiments (`experiments.repro_figures`): fig6a (linear / FNN / LSTM learning curves, mean ±
@@ -10,12 +13,18 @@ std over seeds), fig6b (LSTM, N = 8/16/32/64), fig7 (speed-up over devices and p
 fig8 (39-bus case study, PARS vs UVLS), fig9 (LSTM, N = 32/64/128), fig10_11 (PARS vs PPO over
 wall time and environment steps), fig12 (per-task reward differences PARS − UVLS / MPC /
 PPO on the test set), tab3 (decision time), fig13 (300-bus case study, all four
-controllers). Every experiment runs on the given study; the paper's values are for the case
-the report names. Seeds of one configuration train as one vmapped program.
+controllers), generalisation (not in the paper: the policy against UVLS on the study's
+"generalisation" task set, operating points it never trained on; skipped for a study without
+one). Every experiment runs on the given study at the paper's settings (500 iterations, 5
+seeds, N = 16 on the 39-bus and 128 on the 300-bus, b = N/2, the study's history per policy
+kind and task sampling); the paper's values are for the case the report names. Seeds of one
+configuration train as one vmapped program.
 
 Output folder: OUT/<id>.png and OUT/<id>.json (numbers, settings, wall time of this
 invocation, the trainings' wall time summed over all invocations and the devices they ran on)
-per experiment, OUT/REPORT.md (every figure; our numbers beside the paper's), OUT/runs/ (the
+per experiment, OUT/REPORT.md (every figure; our numbers beside the paper's), OUT/policy/ (the
+best seed of the finished main LSTM training, `experiments.evaluate --controller
+policy:OUT/policy`), OUT/runs/ (the
 trainings and evaluations, named by a hash of their inputs: reused when finished, resumed
 when interrupted, recomputed when an input changes). `--quick` runs everything with tiny
 settings (2 iterations, 1.5-s episodes, a few test tasks) as a check of the pipeline.
@@ -29,7 +38,7 @@ import sys
 import time
 from pathlib import Path
 
-from experiments.repro_figures import EXPERIMENTS, PAPER
+from experiments.repro_figures import EXPERIMENTS, PAPER, NotApplicable
 from experiments.repro_runs import FULL, QUICK, Runs
 
 
@@ -49,7 +58,11 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
         print(f"--- {name}: {PAPER[name]['title']}", flush=True)
         runs.trainings.clear()
         start = time.perf_counter()
-        result = experiment(runs, runs.out / f"{name}.png")
+        try:
+            result = experiment(runs, runs.out / f"{name}.png")
+        except NotApplicable as why:
+            print(f"--- {name}: skipped: {why}", flush=True)
+            continue
         wall_s = time.perf_counter() - start
         training_s, trained_on = runs.training_time()
         result.update(id=name, figure=f"{name}.png", wall_s=round(wall_s, 1),
@@ -57,7 +70,10 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
                       study=runs.study.name, quick=quick)
         (runs.out / f"{name}.json").write_text(json.dumps(result, indent=1))
         results[name] = result
-    write_report(runs.out, settings, quick)
+    policy = runs.export_policy()
+    if policy is not None:
+        print(f"policy: {policy}", flush=True)
+    write_report(runs.out, dataclasses.replace(settings, directions=runs.directions), quick)
     return results
 
 
@@ -68,6 +84,10 @@ def write_report(out: Path, settings, quick: bool) -> None:
              f"{json.dumps(dataclasses.asdict(settings))}.", "",
              "Each experiment ran on the study named under it; the paper's values are for the "
              "paper's case and settings, given beside ours.", ""]
+    if (out / "policy" / "policy.json").is_file():
+        lines += ["The best seed of the main LSTM training is in `policy/` (`python -m "
+                  "experiments.evaluate --controller policy:" + str(out / "policy") + " ...`).",
+                  ""]
     for name in EXPERIMENTS:
         path = out / f"{name}.json"
         if not path.is_file():
@@ -110,7 +130,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="tiny settings: a pipeline check")
     p.add_argument("--iterations", type=int, help="PARS iterations per training")
     p.add_argument("--seeds", type=int, help="PARS seeds per configuration")
-    p.add_argument("--ppo-seeds", type=int, help="PPO trainings for fig10_11")
+    p.add_argument("--ppo-seeds", type=int, help="PPO trainings for fig10_11 (the best one "
+                                                  "is fig12's and fig13's)")
+    p.add_argument("--directions", type=int, help="N of the main policy (default: the "
+                                                   "paper's, 16 or 128 by grid size)")
     p.add_argument("--policy", help="a trained PARS policy folder for fig8, fig12, fig13 "
                                     "(default: train one)")
     p.add_argument("--ppo-policy", help="a trained PPO policy folder for fig12, fig13 "
@@ -119,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
                                         "machine: fig7 adds its iteration time")
     args = p.parse_args(argv)
     overrides = {k: v for k, v in (("iterations", args.iterations), ("seeds", args.seeds),
-                                   ("ppo_seeds", args.ppo_seeds), ("policy", args.policy),
+                                   ("ppo_seeds", args.ppo_seeds),
+                                   ("directions", args.directions), ("policy", args.policy),
                                    ("ppo_policy", args.ppo_policy),
                                    ("gpu_timing", args.gpu_timing)) if v is not None}
     only = [s.strip() for s in args.only.split(",") if s.strip()] if args.only else None

@@ -10,6 +10,7 @@ m tasks of the study's training set across its operating points, uniformly or st
 (`--task-sampling`); all operating points share one compiled iteration. Output folder DIR:
   study.toml      the resolved study (`--resume` without --study reads it back)
   metrics.jsonl   one line per iteration: iteration, reward_mean, reward_max, wall_s, rollouts,
+                  env_steps (agent steps simulated, cumulative: failed episodes stop early),
                   device (the devices it ran on, "COUNT × KIND": a run resumed elsewhere says so)
   checkpoints/    orbax checkpoints every --checkpoint-every iterations and at the end
   policy/         the trained policy (experiments.evaluate --controller policy:DIR/policy)
@@ -19,7 +20,9 @@ m tasks of the study's training set across its operating points, uniformly or st
 `--resume` continues from the last checkpoint; `--iterations` is the run's total.
 `--seeds K` trains K seeds of the configuration as one vmapped program (a leading seed axis
 on the training state): metrics.jsonl then holds per-seed lists of reward_mean and
-reward_max (rollouts counts one seed's), and each policy folder holds seed0/ ... seedK-1/.
+reward_max and env_steps (rollouts counts one seed's), and each policy folder holds seed0/ ...
+seedK-1/. The study's [training] settings give the defaults of --history (per policy kind)
+and --task-sampling; episodes run only at the operating points of the task set.
 Multi-host: --coordinator HOST:PORT --num-processes P --process-id I, or --distributed alone
 where `jax.distributed.initialize` can read them from the cluster environment; it is called
 before anything else touches JAX. Process 0 writes the files.
@@ -45,6 +48,18 @@ DEFAULTS = {"study": None, "policy": "lstm", "hidden": "32,32", "directions": 16
 TASKS_PER_ITERATION = 9  # m when --tasks-per-iteration is not given and the set has as many
 
 
+# The paper's Table I per system: the 39-bus column for studies up to 100 buses, else the
+# 300-bus one (N: the directions its main policy trained with; b = N/2).
+PAPER_PRESETS = {"small": {"hidden": "32,32", "decay": 0.99, "directions": 16},
+                 "large": {"hidden": "64,64", "decay": 0.996, "directions": 128}}
+
+
+def paper_preset(study) -> dict:
+    """The `PAPER_PRESETS` entry for `study`'s grid size."""
+    n_buses = len(study.points[0].case.buses.number)
+    return PAPER_PRESETS["large" if n_buses > 100 else "small"]
+
+
 def parser(defaults: dict) -> argparse.ArgumentParser:
     study = defaults["study"]
     p = argparse.ArgumentParser(prog="python -m experiments.train",
@@ -53,8 +68,9 @@ def parser(defaults: dict) -> argparse.ArgumentParser:
     p.add_argument("--policy", default=defaults["policy"], choices=["linear", "fnn", "lstm"])
     p.add_argument("--hidden", default=defaults["hidden"], help="layer widths, e.g. 32,32")
     p.add_argument("--history", type=int,
-                   help="observations stacked (default: the study's; its PNNL task file "
-                        "gives 10 for the 39-bus and 1 or 4 for the 300-bus policies)")
+                   help="observations stacked (default: the study's for the policy kind, "
+                        "[training] history; the PNNL study files give 10 for linear and FNN, "
+                        "1 for LSTM policies)")
     p.add_argument("--directions", type=int, default=defaults["directions"], help="N")
     p.add_argument("--top", type=int, default=defaults["top"], help="b")
     p.add_argument("--step-size", type=float, default=1.0, help="α")
@@ -67,8 +83,9 @@ def parser(defaults: dict) -> argparse.ArgumentParser:
                    help="tasks whose rollouts run as one batch (default all m); batches run "
                         "one after another and stop once all their episodes are done")
     p.add_argument("--task-set", default="train", help="the study's task set to train on")
-    p.add_argument("--task-sampling", default="uniform", choices=["uniform", "stratified"],
-                   help="m distinct tasks uniformly, or k buses × k' durations as the paper")
+    p.add_argument("--task-sampling", choices=["uniform", "stratified"],
+                   help="m distinct tasks uniformly, or k buses × k' durations as the paper "
+                        "(default: the study's [training] task_sampling)")
     p.add_argument("--iterations", type=int, default=defaults["iterations"],
                    help="total iterations of the run (with --resume: continue up to it)")
     p.add_argument("--seed", type=int, default=0)
@@ -118,15 +135,18 @@ def device_label(count: int) -> str:
 
 
 def build(study, policy_kind: str, hidden: tuple[int, ...], config, history: int | None = None,
-          episode: float | None = None, task_set: str = "train", sampling: str = "uniform",
+          episode: float | None = None, task_set: str = "train", sampling: str | None = None,
           mesh=None, seeds: int | None = None) -> Trainer:
     """PARS on `study`'s task set `task_set`, episodes of `episode` s (default the study's),
-    `history` observations stacked (default the study's), rollouts sharded over `mesh`
-    (default: all devices); `seeds` independent trainings in one program (`make_iteration`)."""
+    `history` observations stacked and `sampling` (default the study's for `policy_kind`),
+    rollouts sharded over `mesh` (default: all devices); `seeds` independent trainings in
+    one program (`make_iteration`). The data holds only the set's operating points."""
     from ars.pars import make_iteration
     from ars.policies import Policy, PolicySpec
     from jaxgrid.study import point_episode, stratified_sampler
 
+    history = study.history(policy_kind) if history is None else history
+    sampling = sampling or study.definition.training.task_sampling
     overrides = {k: v for k, v in (("history", history), ("episode", episode)) if v is not None}
     env = study.env(**overrides)
     params = study.params
@@ -137,8 +157,11 @@ def build(study, policy_kind: str, hidden: tuple[int, ...], config, history: int
                                  config.tasks_per_iteration)
               if sampling == "stratified" else None)
     iteration = make_iteration(point_episode(env, params), policy, config, sample, mesh, seeds)
-    return Trainer(iteration, policy, spec, study.batch(study.tasks(task_set)), study.models,
-                   env.config)
+    points = study.task_set(task_set).points(study.n_points)
+    specs = [dataclasses.replace(s, operating_point=points.index(s.operating_point))
+             for s in study.tasks(task_set)]  # indices into the set's points, in order
+    data = jax.tree.map(lambda a: a[np.array(points)], study.models)
+    return Trainer(iteration, policy, spec, study.batch(specs), data, env.config)
 
 
 def layout(env_config) -> dict:
@@ -178,7 +201,8 @@ def _train(args) -> int:
                     args.task_set, args.task_sampling, seeds=args.seeds)
     env_config = trainer.env_config
     run_info = {"study": study.name, "points": [p.label for p in study.points],
-                "task_set": args.task_set, "task_sampling": args.task_sampling,
+                "task_set": args.task_set,
+                "task_sampling": args.task_sampling or study.definition.training.task_sampling,
                 "layout": layout(env_config), "history": env_config.history,
                 "episode": env_config.episode, "config": dataclasses.asdict(config),
                 "seeds": args.seeds}
@@ -201,6 +225,7 @@ def _train(args) -> int:
         metrics_path.write_text("".join(json.dumps(m) + "\n" for m in log))
     done = int(np.max(state.iteration))
     rollouts = log[-1]["rollouts"] if log else 0
+    env_steps = np.array(log[-1]["env_steps"] if log else 0, np.int64)  # per seed, wide
     device = device_label(jax.device_count())
     bar = tqdm(total=args.iterations, initial=done, unit="it", disable=not primary)
     try:  # closing the bar ends its line, so an error starts on a new one
@@ -210,9 +235,11 @@ def _train(args) -> int:
             metrics = jax.device_get(metrics)
             wall = time.perf_counter() - start
             done, rollouts = done + 1, rollouts + int(np.ravel(metrics["rollouts"])[0])
+            env_steps = env_steps + np.asarray(metrics["env_steps"], np.int64)
             row = {"iteration": done, "reward_mean": np.asarray(metrics["reward_mean"]).tolist(),
                    "reward_max": np.asarray(metrics["reward_max"]).tolist(),
-                   "wall_s": round(wall, 3), "rollouts": rollouts, "device": device}
+                   "wall_s": round(wall, 3), "rollouts": rollouts,
+                   "env_steps": env_steps.tolist(), "device": device}
             log.append(row)
             if primary:
                 with open(metrics_path, "a") as metrics_file:

@@ -29,6 +29,7 @@ Built three ways:
         [params]    jaxgrid.env.EnvParams fields (reward weights, action range, recovery)
         [tasks.NAME] jaxgrid.tasks.TaskSet fields (fault_buses, fault_durations,
                     fault_starts, operating_points, fault_r, fault_x)
+        [training]  TrainingSettings fields (history = {lstm = 1, ...}, task_sampling)
 
 `write_study` writes the resolved definition, every field explicit and paths absolute;
 reading it back gives the identical definition.
@@ -114,6 +115,38 @@ class CompileSettings:
     composite: CompositeOptions = CompositeOptions()
 
 
+POLICY_KINDS = ("linear", "fnn", "lstm")
+# The PARS study's inputs per policy kind: 10 stacked observations for linear and FNN
+# policies, the current one for the LSTM (it remembers the rest); built-in studies train so.
+PAPER_HISTORY = {"linear": 10, "fnn": 10, "lstm": 1}
+TASK_SAMPLINGS = ("uniform", "stratified")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainingSettings:
+    """How the study's policies train where the study fixes it (`experiments.train` takes
+    these as its flag defaults).
+
+    Attributes:
+      history: {policy kind: observations stacked}; a kind not named stacks env.history.
+      task_sampling: "uniform" (m distinct tasks) or "stratified" (`stratified_sampler`).
+    """
+
+    history: dict = dataclasses.field(default_factory=dict)
+    task_sampling: str = "uniform"
+
+    def __post_init__(self):
+        bad = {k: v for k, v in self.history.items()
+               if k not in POLICY_KINDS or isinstance(v, bool) or not isinstance(v, int)
+               or v < 1}
+        if bad:
+            raise ValueError(f"training.history {bad}: keys from {list(POLICY_KINDS)}, values "
+                             "ints >= 1")
+        if self.task_sampling not in TASK_SAMPLINGS:
+            raise ValueError(f"training.task_sampling = {self.task_sampling!r}: allowed "
+                             f"{list(TASK_SAMPLINGS)}")
+
+
 @dataclasses.dataclass(frozen=True)
 class StudyDefinition:
     """Everything that rebuilds a study (what `write_study` saves).
@@ -121,7 +154,7 @@ class StudyDefinition:
     Attributes:
       name: the study's name.  grid: its sources.  compile: compile settings.
       env: the environment's structure.  params: reward and action values.
-      tasks: named task sets ("train", "test", ...).
+      tasks: named task sets ("train", "test", ...).  training: TrainingSettings.
     """
 
     name: str
@@ -130,6 +163,7 @@ class StudyDefinition:
     env: EnvConfig
     params: EnvParams
     tasks: dict
+    training: TrainingSettings = TrainingSettings()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,6 +239,10 @@ class Study:
     def point(self, index: int) -> GridModel:
         """The compiled model of operating point `index` (host arrays)."""
         return jax.tree.map(lambda a: a[index], self.models)
+
+    def history(self, policy_kind: str) -> int:
+        """Observations a `policy_kind` policy stacks in this study's training."""
+        return self.definition.training.history.get(policy_kind, self.config.history)
 
     def env(self, **config) -> LoadSheddingEnv:
         """The environment; `config` overrides EnvConfig fields, e.g. episode=6.0 (s)."""
@@ -348,7 +386,7 @@ def rebuild(study: Study, **compile_changes) -> Study:
 
     return build(d.grid, name=d.name, compile=dataclasses.replace(d.compile, **compile_changes),
                  env=fields(d.env), params=fields(d.params),
-                 tasks={k: fields(v) for k, v in d.tasks.items()})
+                 tasks={k: fields(v) for k, v in d.tasks.items()}, training=fields(d.training))
 
 
 @contextlib.contextmanager
@@ -363,13 +401,14 @@ def _named(name):
 def build(grid: GridSource, name: str | None = None,
           compile: CompileSettings = CompileSettings(), env: dict | None = None,
           params: dict | None = None, tasks: dict | None = None,
-          origin: str = "study") -> Study:
-    """The study of `grid` with overrides of the source's env, params and task sets.
+          training: dict | None = None, origin: str = "study") -> Study:
+    """The study of `grid` with overrides of the source's env, params, task sets and
+    training settings.
 
-    env, params: {field: value}; tasks: {set name: {TaskSet field: value}} (a new name adds
-    a set, fault buses and durations then required). A bad value raises an InputError
-    naming it as written: "ORIGIN: env.dt" for an override (origin: the study file), the
-    PNNL file and key for a value read from one.
+    env, params, training: {field: value}; tasks: {set name: {TaskSet field: value}} (a new
+    name adds a set, fault buses and durations then required). A bad value raises an
+    InputError naming it as written: "ORIGIN: env.dt" for an override (origin: the study
+    file), the PNNL file and key for a value read from one.
     """
     notes: list[str] = []
     if grid.builtin:
@@ -434,7 +473,8 @@ def build(grid: GridSource, name: str | None = None,
         task_sets[set_name].points(len(points))
     definition = StudyDefinition(
         name=name or defaults["name"], grid=grid, compile=compile, env=config,
-        params=EnvParams(**param_values), tasks=task_sets)
+        params=EnvParams(**param_values), tasks=task_sets,
+        training=TrainingSettings(**{**defaults.get("training", {}), **(training or {})}))
     if defaults.get("pnnl_task"):
         notes.extend(_pnnl_checks(defaults["pnnl_task"], config, buses, models[0],
                                   points[0][2].base_mva))
@@ -463,6 +503,7 @@ def _builtin_points(grid: GridSource):
         "env": {"observed_buses": first.observed_buses, "action_buses": first.action_buses,
                 "dt": first.dt},
         "params": dict(first.reward), "sweeps": first.sweeps,
+        "training": {"history": dict(PAPER_HISTORY)},
         "tasks": {k: {"fault_buses": tuple(b), "fault_durations": tuple(d)}
                   for k, (b, d) in first.task_sets.items()}}
     # machine data and MBASE are those of level 1 at every level: one DYR serves all points
@@ -651,7 +692,7 @@ def stack_models(models: list[GridModel], sources: list[str]) -> GridModel:
 # Study files
 # --------------------------------------------------------------------------- #
 
-_SECTIONS = {"name", "grid", "compile", "env", "params", "tasks"}
+_SECTIONS = {"name", "grid", "compile", "env", "params", "tasks", "training"}
 
 
 def read_study(path: str | Path) -> Study:
@@ -679,11 +720,12 @@ def read_study(path: str | Path) -> Study:
     params = _fields(EnvParams, data.get("params", {}), path, "params")
     tasks = {name: _fields(TaskSet, values, path, f"tasks.{name}")
              for name, values in _table(data.get("tasks", {}), path, "tasks").items()}
+    training = _fields(TrainingSettings, data.get("training", {}), path, "training")
     name = data.get("name")
     if name is not None and not isinstance(name, str):
         raise ValueError(f"{path}: name = {name!r}: must be a string")
     return build(source, name=name, compile=compile_settings, env=env, params=params,
-                 tasks=tasks, origin=str(path))
+                 tasks=tasks, training=training, origin=str(path))
 
 
 def write_study(study: Study | StudyDefinition, path: str | Path) -> None:
@@ -736,10 +778,15 @@ def _coerce(value, annotation: str, path, key):
     """value as the annotated type (str annotations: float, int, bool, str, tuple[X, ...],
     the nested option dataclasses, and `X | None`)."""
     base = annotation.removesuffix(" | None")
-    kind = re.sub(r"tuple\[(\w+), \.\.\.\]", r"a list of \1", base)
+    kind = "a table of ints" if base == "dict" else re.sub(
+        r"tuple\[(\w+), \.\.\.\]", r"a list of \1", base)
     bad = ValueError(f"{path}: {key} = {value!r}: must be {kind}")
     if base in _NESTED:
         return _typed(_NESTED[base], value, path, key)
+    if base == "dict":  # a table of ints (training.history)
+        if not isinstance(value, dict):
+            raise bad
+        return {k: _coerce(v, "int", path, f"{key}.{k}") for k, v in value.items()}
     if base.startswith("tuple["):
         if not isinstance(value, list):
             raise bad

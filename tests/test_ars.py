@@ -189,3 +189,20 @@ def test_tasks_data_and_sampler_are_arguments(quadratic):
     assert iteration.compiled._cache_size() == 1
     assert picked[2] == 0.0 and picked[0] < 0.0, "the data scales the reward"
     assert picked[0] != picked[1], "the sampler indexes the tasks given"
+
+
+def test_env_steps_count_the_steps_each_episode_reports(quadratic):
+    """An episode that reports its steps (a failed one stops early) is counted as it says:
+    tasks of 3 and 5 steps, both drawn, 2N = 16 rollouts each."""
+    policy, config = quadratic
+
+    def episode(apply, params, task, carry, scale):
+        out = quadratic_episode(apply, params, task, carry, scale)
+        return {**out, "steps": jnp.where(task[0] < -0.07, 5, 3)}
+
+    iteration = make_iteration(episode, policy, config)
+    _, metrics = iteration(init_state(policy, config), TARGETS[:2], 1.0)
+    assert int(metrics["env_steps"]) == 16 * (3 + 5)
+    _, metrics = make_iteration(quadratic_episode, policy, config)(
+        init_state(policy, config), TARGETS, 1.0)
+    assert "env_steps" not in metrics, "an episode without steps reports none"

@@ -1,7 +1,9 @@
-"""`experiments.reproduce --quick`: every experiment writes its figure and numbers, REPORT.md
-names each beside the paper's values, a second run reuses every finished run and reports its
-trainings' time, fig7's GPU timing file, and the convergence rule on curves whose answer is
-known by hand."""
+"""`experiments.reproduce --quick`: every experiment (generalisation included, on the built-in
+39-bus study at two load levels, trained at one) writes its figure and numbers, REPORT.md
+names each beside the paper's values, the best LSTM policy is exported and evaluates, a
+second run reuses every finished run and reports its trainings' time, fig7's GPU timing file,
+the environment steps actually simulated, and the convergence rule and the side claims on
+inputs whose answer is known by hand."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,15 +13,39 @@ import jax
 import numpy as np
 import pytest
 
+from experiments import repro_claims as claims
 from experiments.repro_figures import EXPERIMENTS, PAPER
 from experiments.repro_runs import QUICK, Runs, convergence_iteration
 from experiments.reproduce import main, run
 
+# The built-in 39-bus study at two load levels: trained and tested at the first, the second
+# the generalisation set's (quick settings keep 2 fault buses and 1 duration of each set).
+LEVELS_STUDY = """name = "ieee39_levels"
+[grid]
+builtin = "ieee39_fidvr"
+load_levels = [1.0, 0.9]
+[tasks.train]
+operating_points = [0]
+[tasks.test]
+operating_points = [0]
+[tasks.generalisation]
+fault_buses = [3, 4]
+fault_durations = [0.08]
+operating_points = [1]
+"""
+
 
 @pytest.fixture(scope="module")
-def quick(tmp_path_factory):
+def study_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("study") / "ieee39_levels.toml"
+    path.write_text(LEVELS_STUDY)
+    return path
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory, study_file):
     out = tmp_path_factory.mktemp("reproduce")
-    assert main(["--quick", "--out", str(out)]) == 0
+    assert main(["--quick", "--study", str(study_file), "--out", str(out)]) == 0
     return out
 
 
@@ -45,13 +71,51 @@ def test_every_experiment_writes_its_figure_numbers_and_report_entry(quick):
     assert fig7["speed-up, 2 cpu device(s)"] > 0, "1 and 2 devices timed"
     fig10 = json.loads((quick / "fig10_11.json").read_text())["numbers"]
     assert np.isfinite(fig10["final training reward, PPO"]), "a PPO episode ended"
+    fig12 = json.loads((quick / "fig12.json").read_text())["numbers"]
+    for key in ("PARS − UVLS more than M on", "PARS − PPO less than M/2 on", "PPO fails on",
+                "mean reward, PARS − MPC"):
+        assert key in fig12 and f"| {key} |" in report, key
+    fig13 = json.loads((quick / "fig13.json").read_text())["numbers"]
+    assert set(fig13["sheds the least"].split(", ")) <= {"PARS", "MPC", "PPO", "UVLS"}
+    assert all(isinstance(fig13[f"buses not recovered, {k}"], int) for k in ("PARS", "UVLS"))
+    tab3 = json.loads((quick / "tab3.json").read_text())["numbers"]
+    assert {"pars_linear", "pars_fnn", "pars_lstm"} <= {k.split(",")[0] for k in tab3}, \
+        "fig6a's trained networks timed"
+
+
+def test_training_counts_the_environment_steps_it_simulated(quick):
+    """metrics.jsonl's env_steps: per seed, cumulative, at most 15 agent steps (1.5 s) per
+    rollout; fig11's PARS steps are their mean over the seeds."""
+    rows = [json.loads(line) for line in next((quick / "runs").glob("pars_lstm_N2-*"))
+            .joinpath("metrics.jsonl").read_text().splitlines()]
+    steps = np.array([r["env_steps"] for r in rows])  # (iterations, seeds)
+    assert steps.shape == (QUICK.iterations, QUICK.seeds) and np.all(np.diff(steps, axis=0) > 0)
+    assert np.all(steps[-1] <= rows[-1]["rollouts"] * 15)
+    fig10 = json.loads((quick / "fig10_11.json").read_text())["numbers"]
+    assert fig10["environment steps, PARS (mean over seeds)"] == int(steps[-1].mean())
+
+
+def test_generalisation_and_the_exported_policy(quick, study_file, tmp_path):
+    """The main policy against UVLS at the untrained load level, and OUT/policy evaluating
+    with `experiments.evaluate` on the study file."""
+    from experiments.evaluate import main as evaluate
+
+    result = json.loads((quick / "generalisation.json").read_text())
+    numbers = result["numbers"]
+    assert numbers["tasks"] == 2 and numbers["operating points"] == 1
+    assert numbers["PARS better than UVLS on"].endswith(" %")
+    assert "PARS better than UVLS at load90" in numbers
+    out = tmp_path / "policy.json"
+    assert evaluate(["--study", str(study_file), "--controller", f"policy:{quick / 'policy'}",
+                     "--tasks", "generalisation", "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["summary"]["n_tasks"] == 2
 
 
 def test_a_second_run_reuses_the_finished_runs(quick):
     trained = sorted((quick / "runs").glob("*/metrics.jsonl"))
     before = {p: p.stat().st_mtime_ns for p in trained}
     folders = sorted(p.name for p in (quick / "runs").iterdir())
-    run("ieee39_fidvr", quick, ["fig6b", "fig8", "fig12"], quick=True)
+    run(str(quick / "study.toml"), quick, ["fig6b", "fig8", "fig12"], quick=True)
     assert sorted(p.name for p in (quick / "runs").iterdir()) == folders, "nothing new ran"
     assert {p: p.stat().st_mtime_ns for p in trained} == before, "no training touched"
     fig6b = json.loads((quick / "fig6b.json").read_text())
@@ -65,7 +129,7 @@ def test_a_second_run_reuses_the_finished_runs(quick):
             in (quick / "REPORT.md").read_text())
 
 
-def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(quick, tmp_path):
+def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(tmp_path):
     """Which row of a benchmark file fig7 takes (this study, N = directions, one device).
     The rows carry no timing: no speed is measured or judged here."""
     wanted = {"directions": QUICK.directions, "devices": 1, "row": "wanted"}
@@ -76,7 +140,7 @@ def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(quic
                        {"case": "ieee39_fidvr", "runs": [*others, wanted]}]}
     path = tmp_path / "train.json"
     path.write_text(json.dumps(bench))
-    runs = Runs("ieee39_fidvr", quick, dataclasses.replace(QUICK, gpu_timing=str(path)))
+    runs = Runs("ieee39_fidvr", tmp_path, dataclasses.replace(QUICK, gpu_timing=str(path)))
     label, row = runs.gpu_row()
     assert label == "1 Example GPU (train.json)"
     assert row["row"] == "wanted"
@@ -100,3 +164,44 @@ def test_convergence_rule_on_curves_known_by_hand():
     ramp = -200.0 + iterations.astype(float)
     assert convergence_iteration(iterations, ramp, 1) == 98
     assert convergence_iteration(iterations[:9], step[:9], 5) is None, "under two windows"
+
+
+def _result(controller: str, rows: list[tuple]) -> dict:
+    """An evaluate result of tasks (fault bus, reward, recovered) at point "p0", 0.1 s."""
+    return {"controller": controller, "tasks": [
+        {"fault_bus": bus, "fault_duration": 0.1, "fault_start": 1.0, "operating_point": "p0",
+         "reward": reward, "recovered": recovered} for bus, reward, recovered in rows]}
+
+
+def test_side_claims_on_results_whose_answers_are_known_by_hand():
+    pars = _result("pars", [(1, -100.0, True), (2, -300.0, True), (3, -500.0, True),
+                            (4, -20000.0, False)])
+    uvls = _result("uvls", [(1, -15000.0, False), (2, -200.0, True), (3, -500.0, True),
+                            (4, -19000.0, False)])
+    ppo = _result("ppo", [(2, -6000.0, True), (1, -100.0, True), (3, -400.0, True),
+                          (4, -30000.0, False)])  # another order: paired by task
+    none = _result("none", [(1, -16000.0, False), (2, -100.0, True), (3, -900.0, False),
+                            (4, -25000.0, False)])
+    # PARS − UVLS: 14900, −100, 0, −1000
+    assert claims.difference_shares(pars, uvls, more_than=10000) == {
+        "better": "25.00 %", "at least as good": "50.00 %", "more than": "25.00 %"}
+    # PARS − PPO: 0, 5700, −100, 10000
+    assert claims.difference_shares(pars, ppo, less_than=5000)["less than"] == "50.00 %"
+    assert claims.failures(ppo) == "1 of 4" and claims.failures(uvls) == "2 of 4"
+    wins = claims.shedding_wins(none, pars, uvls)  # buses 1, 3, 4 need shedding
+    assert wins["better on tasks that need shedding"] == "1 of 3"
+    assert wins["not better on"] == ["bus 3, 0.1 s, p0: -500.0 vs -500.0",
+                                     "bus 4, 0.1 s, p0: -20000.0 vs -19000.0"]
+    with pytest.raises(ValueError, match="different tasks"):
+        claims.paired_rewards(pars, _result("short", [(1, 0.0, True)]))
+
+
+def test_buses_not_recovered_and_the_best_ppo_seed():
+    trace = {"recovered": False, "observed": [10, 11, 12, 13],
+             "vm": [[1.0, 0.96, 0.90, 1.0], [0.5, 0.5, 0.5, 0.5], [0.94, 0.97, 0.80, 0.93]]}
+    # bus 12 sat below 0.95 before the fault: not checked; 10 and 13 end below it
+    assert claims.buses_not_recovered(trace, 0.95) == [10, 13]
+    assert claims.buses_not_recovered({**trace, "recovered": True}, 0.95) == []
+    rows = [[{"reward_mean": -50.0}, {"reward_mean": -900.0}],
+            [{"reward_mean": -800.0}, {"reward_mean": -300.0}], []]
+    assert claims.best_ppo_seed(rows) == 1, "the last line counts; an empty run never wins"
