@@ -12,7 +12,9 @@ on one CPU device:
   (`scalar_math`: XLA:CPU evaluates them element by element, at 1.5–14 ns each, and copies
   one into every fusion that reads it; `jaxgrid.vecmath` replaces them in the step);
 - time (µs per rollout-step, best of `--calls` calls of 50 steps each) of the whole step,
-  of the network solution alone (one `solve_network`; a step makes two), of one Euler
+  of the network solution alone (one `solve_network`; a step makes two), and within it of
+  one evaluation of the load slots' injections (`load_injection`, once per sweep) and of one
+  slot-impedance product (`network.times`, once per sweep), of one Euler
   stage (network + device models + state update), of the load models' discrete update
   (`update_loads`, once a step), of one limit clip (`clip_to_limits`, two a step) and of the
   divergence check (`within_bounds`, once an agent step: not part of the step's share), so
@@ -31,7 +33,8 @@ import numpy as np
 from experiments.bench_sim import _timed, write_report
 from jaxgrid import network
 from jaxgrid.batching import batch_last
-from jaxgrid.dynamics import axpy, clip_to_limits, derivatives, solve_network, update_loads
+from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, load_injection, solve_network,
+                              update_loads)
 from jaxgrid.simulate import Bounds, heun_step, within_bounds
 from jaxgrid.study import load_study
 
@@ -102,6 +105,9 @@ def profile_model(model, dt: float, tasks, calls: int) -> dict:
         "step": one_step,
         "solve": lambda model, x, task: x.replace(
             v=solve_network(model, x, fault_of(model, task), 1.0)[0]),
+        "load_currents": lambda model, x, task: x.replace(v=x.v.at[model.n_gen:].set(
+            load_injection(model, x, x.v[model.n_gen:]))),
+        "product": lambda model, x, task: x.replace(v=network.times(model.network.zr_ss, x.v)),
         "rhs": lambda model, x, task: euler(model, x, fault_of(model, task)),
         "loads": lambda model, x, task: update_loads(model, x, 0.999 * x.v, dt),
         "clip": lambda model, x, task: x.with_integrated(
@@ -127,6 +133,9 @@ def profile_model(model, dt: float, tasks, calls: int) -> dict:
              "load models' discrete update": times["loads_us"] / times["step_us"],
              "limit clips (2)": 2 * times["clip_us"] / times["step_us"]}
     share["rest (state updates, events, copies)"] = 1 - sum(share.values())
+    sweeps = 2 * model.sweeps  # per step
+    share["of which load injections"] = sweeps * times["load_currents_us"] / times["step_us"]
+    share["of which impedance products"] = sweeps * times["product_us"] / times["step_us"]
     return {"batch": batch, "dt_s": dt, "n_slot": len(model.slot_bus),
             "sweeps": model.sweeps, "kernels_per_step": kernels(step_text),
             "us_per_rollout_step": {k: round(v, 3) for k, v in times.items()},

@@ -24,8 +24,8 @@ from flax import struct
 from jaxgrid import network
 from jaxgrid.checks import Range
 from jaxgrid.batching import vmap_minor
-from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, machine_state, solve_network,
-                              update_loads)
+from jaxgrid.dynamics import (clip_to_limits, derivatives, exponential_heun, machine_state,
+                              solve_network, update_loads)
 from jaxgrid.grid import GridModel, GridState
 
 
@@ -188,9 +188,10 @@ def fault_active(task: Task, t, dt):
 
 
 def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault):
-    """One modified-Euler step from t to t + dt; returns (state, network residual).
+    """One modified-Euler (Heun) step from t to t + dt; returns (state, network residual).
 
-    Scheduled load changes apply at the start of the step; the load models' discrete
+    Stiff induction-motor states are advanced by the exponential form of the same step
+    (`jaxgrid.dynamics.exponential_heun`). Scheduled load changes apply at the start of the step; the load models' discrete
     logic advances after the corrector from the corrector's network voltages.
     """
     x = scheduled_shedding(task, x, t, dt)
@@ -199,11 +200,12 @@ def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: n
         return derivatives(model, x.with_integrated(states, v), fault,
                            fault_active(task, time, dt))
 
+    predict, correct = exponential_heun(model, x, dt)
     s0 = x.integrated()
     k1, v1, r1 = rates(s0, x.v, t)
-    predicted = clip_to_limits(model, axpy(dt, k1, s0))
+    predicted = clip_to_limits(model, predict(s0, k1))
     k2, v2, r2 = rates(predicted, v1, t + dt)
-    new = clip_to_limits(model, axpy(0.5 * dt, k2, axpy(0.5 * dt, k1, s0)))
+    new = clip_to_limits(model, correct(s0, predicted, k1, k2))
     return update_loads(model, x.with_integrated(new, v2), x.v, dt), jnp.maximum(r1, r2)
 
 

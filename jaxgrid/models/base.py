@@ -300,3 +300,11 @@ class LoadModel(DeviceModel):
     def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:
         """Flags after an accepted step: v the new, v_old the previous bus voltage (n,)."""
         return z
+
+    @classmethod
+    def stiff_rates(cls, p: Params, x: States, z: States) -> dict[tuple[str, str], Array]:
+        """{(real state, imaginary state): λ (n,) complex, 1/s} for complex states whose rate
+        is stiff and linear in themselves at a fixed bus voltage, d(x_r + j·x_i)/dt ≈
+        λ·(x_r + j·x_i) + rest. The step integrates λ exactly (`jaxgrid.dynamics`,
+        exponential Heun); none by default."""
+        return {}

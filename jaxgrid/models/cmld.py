@@ -315,6 +315,13 @@ class Cmldblu2(LoadModel):
         return out
 
     @classmethod
+    def stiff_rates(cls, p: Params, x: States, z: States) -> dict[tuple[str, str], Array]:
+        """Motors A-C's stiff E' and ψk rates (`Cim5bl.stiff_rates`)."""
+        return {(f"m{m}_{re}", f"m{m}_{im}"): lam for m in MOTORS
+                for (re, im), lam in Cim5bl.stiff_rates(_sub(p, f"m{m}_"), _sub(x, f"m{m}_"),
+                                                        {}).items()}
+
+    @classmethod
     def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:
         """Flags after an accepted step: motor D, electronic memory, UV trip/reclose (§4-5)."""
         vmag = jnp.abs(v)

@@ -34,8 +34,11 @@ load report):
 CIMWBL is not supported: its CON list is unverified (spec §1.3).
 
 Step size: the slip rotation −j·ωb·s·E' makes a stalled motor (s → 1, |ωb·s| ≈ 377 1/s)
-unstable under Heun at 5 ms (growth ≈ 1.9 per step); at 2 ms it is stable. Simulate cases
-whose induction motors may stall with dt <= 2 ms; a run that blows up is flagged diverged.
+unstable under plain Heun at 5 ms (growth ≈ 1.9 per step), and the stator's short-circuit
+decay (≈ (Ls/Lp)/T'0, some 100-200 1/s) is stiff as well. Both are linear in E' (and ψk) at a
+fixed bus voltage, so `stiff_rates` declares them and the step integrates them exactly
+(exponential Heun, `jaxgrid.dynamics`): the step size is then set by accuracy, not by a
+stalled motor's stability.
 """
 from __future__ import annotations
 
@@ -255,6 +258,23 @@ class Cim5bl(LoadModel):
         on = z["status"]
         return {"epr": on * jnp.real(dep), "epi": on * jnp.imag(dep),
                 "psir": on * jnp.real(dpsik), "psii": on * jnp.imag(dpsik), "w": on * dw}
+
+    @classmethod
+    def stiff_rates(cls, p: Params, x: States, z: States) -> dict[tuple[str, str], Array]:
+        """λ = ∂(dE'/dt)/∂E' and ∂(dψk/dt)/∂ψk at a fixed bus voltage (spec §4), complex
+        (n,), 1/s: the stator's short-circuit decay and the slip rotation −j·ωb·s, which an
+        explicit step cannot follow once a motor stalls (|ωb·s| ≈ 377 1/s). Saturation is
+        frozen at the step's start; ψk has none without a second cage."""
+        _, _, epp = cls._emfs(p, x)
+        y = 1.0 / (p["ra"] + 1j * p["lpp"])
+        rotation = -1j * p["omega_b"] * (1.0 - x["w"])
+        se = quadratic_saturation(jnp.abs(epp), p["sat_a"], p["sat_b"])
+        d_delta = 1.0 - 1j * (p["lp"] - p["ll"]) * p["k5"] * y  # ∂Δ/∂E'
+        lam_ep = (-1.0 + (p["ls"] - p["lp"]) * (-1j * p["k5"] * y - p["k3"] * d_delta)
+                  - se * p["k5"]) / p["tp0"] + rotation
+        lam_psi = jnp.where(p["double"] > 0, (-1.0 - 1j * (p["lp"] - p["ll"]) * p["k4"] * y)
+                            / safe(p["tpp0"]) + rotation, 0.0)
+        return {("epr", "epi"): lam_ep, ("psir", "psii"): lam_psi}
 
     @classmethod
     def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:
