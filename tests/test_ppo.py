@@ -33,7 +33,9 @@ TINY = ["--envs", "4", "--rollout-steps", "3", "--epochs", "2", "--minibatches",
 
 @pytest.fixture(scope="module")
 def two_points():
-    return builtin("ieee39_fidvr", (0.9, 1.0), env={"episode": 0.3})
+    # the faults (at 1.0 s) moved inside the short episode, as a study must have them
+    return builtin("ieee39_fidvr", (0.9, 1.0), env={"episode": 0.3},
+                   tasks={name: {"fault_starts": (0.1,)} for name in ("train", "test")})
 
 
 def test_adapter_resets_and_steps_as_the_env_at_the_drawn_task(two_points):
@@ -135,7 +137,8 @@ def tiny(tmp_path_factory):
     folder's study.toml has them too) and tiny PPO settings."""
     study = tmp_path_factory.mktemp("study") / "short.toml"
     study.write_text('name = "ieee39_short"\n[grid]\nbuiltin = "ieee39_fidvr"\n'
-                     '[env]\nepisode = 0.3\n')
+                     '[env]\nepisode = 0.3\n[tasks.train]\nfault_starts = [0.1]\n'
+                     '[tasks.test]\nfault_starts = [0.1]\n')
     return ["--study", str(study)] + TINY
 
 
