@@ -174,22 +174,27 @@ def phi_functions(z):
             jnp.where(small, series2, (exp - 1 - zs) / (zs * zs)))
 
 
-def _with_stiff_pairs(states, rates, new_value):
-    """`states` with every stiff pair (re, im) of load group g set to the real and imaginary
-    parts of new_value(g, (re, im), λ)."""
+def _stiff_pairs(rates) -> list[tuple[int, tuple[str, str]]]:
+    """(load group, (real state, imaginary state)) of every stiff pair, in `rates` order."""
+    return [(g, names) for g, lams in enumerate(rates) for names in lams]
+
+
+def _gather(states, pairs):
+    """(n_stiff,) complex: every stiff pair's value, concatenated in `pairs` order."""
+    return jnp.concatenate([states[3][g][re] + 1j * states[3][g][im] for g, (re, im) in pairs])
+
+
+def _scatter(states, pairs, values):
+    """`states` with the stiff pairs set to the parts of `values` (n_stiff,) complex."""
     machines, exciters, governors, loads = states
-    out = []
-    for g, (xs, lams) in enumerate(zip(loads, rates)):
-        xs = dict(xs)
-        for names, lam in lams.items():
-            value = new_value(g, names, lam)
-            xs[names[0]], xs[names[1]] = jnp.real(value), jnp.imag(value)
-        out.append(xs)
-    return machines, exciters, governors, tuple(out)
-
-
-def _pair(states, g: int, names):
-    return states[3][g][names[0]] + 1j * states[3][g][names[1]]
+    loads = [dict(xs) for xs in loads]
+    offset = 0
+    for g, (re, im) in pairs:
+        n = loads[g][re].shape[0]
+        part = values[offset:offset + n]
+        loads[g][re], loads[g][im] = jnp.real(part), jnp.imag(part)
+        offset += n
+    return machines, exciters, governors, tuple(loads)
 
 
 def exponential_heun(model: GridModel, x: GridState, dt: float):
@@ -200,22 +205,31 @@ def exponential_heun(model: GridModel, x: GridState, dt: float):
         predicted = s0 + dt·φ1(λdt)·k1
         new       = predicted + dt·φ2(λdt)·(k2 − k1 − λ·(predicted − s0)),
 
-    which integrates the part λ·s exactly and is Heun's method where λ = 0.
+    which integrates the part λ·s exactly and is Heun's method where λ = 0. Every pair of
+    every group is handled as one concatenated array (one set of kernels, not one per pair).
     predict(s0, k1) -> predicted; correct(s0, predicted, k1, k2) -> new (state trees).
     """
     rates = stiff_rates(model, x)
-    phis = [{names: phi_functions(lam * dt) for names, lam in lams.items()} for lams in rates]
+    pairs = _stiff_pairs(rates)
+
+    def euler(s0, k1):
+        return axpy(dt, k1, s0)
+
+    def heun(s0, predicted, k1, k2):
+        return axpy(0.5 * dt, k2, axpy(0.5 * dt, k1, s0))
+
+    if not pairs:
+        return euler, heun
+    lam = jnp.concatenate([rates[g][names] for g, names in pairs])
+    phi1, phi2 = phi_functions(lam * dt)
 
     def predict(s0, k1):
-        euler = axpy(dt, k1, s0)
-        return _with_stiff_pairs(euler, rates, lambda g, names, lam: _pair(s0, g, names)
-                                 + dt * phis[g][names][0] * _pair(k1, g, names))
+        return _scatter(euler(s0, k1), pairs,
+                        _gather(s0, pairs) + dt * phi1 * _gather(k1, pairs))
 
     def correct(s0, predicted, k1, k2):
-        heun = axpy(0.5 * dt, k2, axpy(0.5 * dt, k1, s0))
-        return _with_stiff_pairs(heun, rates, lambda g, names, lam: _pair(predicted, g, names)
-                                 + dt * phis[g][names][1] * (
-                                     _pair(k2, g, names) - _pair(k1, g, names)
-                                     - lam * (_pair(predicted, g, names) - _pair(s0, g, names))))
+        p0 = _gather(predicted, pairs)
+        step = _gather(k2, pairs) - _gather(k1, pairs) - lam * (p0 - _gather(s0, pairs))
+        return _scatter(heun(s0, predicted, k1, k2), pairs, p0 + dt * phi2 * step)
 
     return predict, correct
