@@ -372,3 +372,20 @@ def test_cross_checks_name_the_pnnl_key(shared_cases, tmp_path):
     with pytest.raises(ValueError, match=r"task.json: envStepTimeInSec = 0.1003: must be a whole "
                                          r"number \(>= 1\) of simulation steps"):
         from_files(shared_cases / BASE, shared_cases / DYR, path, shared_cases / SIM)
+
+
+def test_pnnl_39_bus_study_file_has_the_papers_settings(shared_cases):
+    """studies/ieee39_pnnl.toml (read in place, with ../shared beside the checkout): the
+    paper's training set (buses 4, 15, 21 × 0/0.05/0.08 s at 1.0 s, base case: 9 tasks), its
+    action range [-0.2, 0], history 10/10/1 by policy kind, and the measured step (2 ms, one
+    sweep)."""
+    from pathlib import Path
+
+    study = read_study(Path(__file__).parent.parent / "studies" / "ieee39_pnnl.toml")
+    train = study.tasks("train")
+    assert sorted({(s.fault_bus, s.fault_duration, s.fault_start) for s in train}) == [
+        (b, d, 1.0) for b in (4, 15, 21) for d in (0.0, 0.05, 0.08)]
+    assert {s.operating_point for s in train} == {0} and len(study.tasks("test")) == 120
+    assert (study.params.action_low, study.params.action_high) == (-0.2, 0.0)
+    assert [study.history(k) for k in ("linear", "fnn", "lstm")] == [10, 10, 1]
+    assert (study.config.dt, study.point(0).sweeps) == (0.002, 1)
