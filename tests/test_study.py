@@ -376,7 +376,7 @@ def test_cross_checks_name_the_pnnl_key(shared_cases, tmp_path):
 
 def test_pnnl_39_bus_study_file_has_the_papers_settings(shared_cases):
     """studies/ieee39_pnnl.toml (read in place, with ../shared beside the checkout): the
-    paper's observed buses, its training set (buses 4, 15, 21 × 0/0.05/0.08 s at 1.0 s, base case: 9 tasks), its
+    paper's training set (buses 4, 15, 21 × 0/0.05/0.08 s at 1.0 s, base case: 9 tasks), its
     action range [-0.2, 0], history 10/10/1 by policy kind, and the measured step (2 ms, one
     sweep)."""
     from pathlib import Path
@@ -389,4 +389,3 @@ def test_pnnl_39_bus_study_file_has_the_papers_settings(shared_cases):
     assert (study.params.action_low, study.params.action_high) == (-0.2, 0.0)
     assert [study.history(k) for k in ("linear", "fnn", "lstm")] == [10, 10, 1]
     assert (study.config.dt, study.point(0).sweeps) == (0.002, 1)
-    assert study.config.observed_buses == (4, 7, 8, 18)  # the LSTM's 7 inputs with 3 fractions
