@@ -191,8 +191,9 @@ def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: n
     """One modified-Euler (Heun) step from t to t + dt; returns (state, network residual).
 
     Stiff induction-motor states are advanced by the exponential form of the same step
-    (`jaxgrid.dynamics.exponential_heun`). Scheduled load changes apply at the start of the step; the load models' discrete
-    logic advances after the corrector from the corrector's network voltages.
+    (`jaxgrid.dynamics.exponential_heun`). Scheduled load changes apply at the start of the
+    step; the load models' discrete logic advances after the corrector from the corrector's
+    network voltages.
     """
     x = scheduled_shedding(task, x, t, dt)
 
