@@ -11,44 +11,61 @@ How: the function is traced once per call for one example (`jax.make_jaxpr`) and
 evaluated with each value either unbatched or batched along a trailing axis of size B. Each
 primitive has a rule keeping the batch last (elementwise ops broadcast their unbatched
 operands, gathers and scatters take the batch as one more window dimension, loops carry it).
-A primitive without a rule falls back to `jax.vmap` of that primitive alone, moving the
-batch to the front and back (correct, only slower; `FALLBACKS` counts them by name).
+The primitives handled are declared in one table, `RULES`, checked at import against the
+installed JAX: a JAX release not in `KNOWN_JAX`, or one lacking a primitive of the table, is
+refused with an ImportError naming both. A primitive without a rule falls back to `jax.vmap`
+of that primitive alone, moving the batch to the front and back (correct, only slower;
+`fallbacks` lists them for a given call).
 
 Per-example matrices are the exception: XLA's batched product wants their batch first. A
-function wrapped in `batch_major` (the policy) is batched with `jax.vmap` where it is met,
-and arguments passed with `first` (the perturbed θ) stay batch-first until something other
-than such a function reads them, so loop-invariant weights are never transposed.
+function wrapped in `batch_major` (the policy) is a `jax.jit` whose body starts by passing its
+arguments through a marker primitive (an identity that lowers to nothing); a call holding it
+is batched with `jax.vmap` where it is met, and arguments passed with `first` (the perturbed
+θ) stay batch-first until something other than such a call reads them, so loop-invariant
+weights are never transposed.
 
-Differentiating *through* a `vmap_minor`-ed function differentiates the evaluated primitives,
-so custom derivative rules inside it (`jax.custom_jvp`) are not used; differentiate inside
-it, or use `jax.vmap`, where that matters. The results equal `jax.vmap`'s up to float
-rounding (XLA may fuse in a different order; tested).
+Differentiation: the batch-last evaluation is a `jax.custom_jvp` whose tangent rule is
+`jax.jvp` of `jax.vmap` of the per-example program, so the primitives the interpreter
+evaluates are never differentiated: custom rules inside (`jax.custom_jvp`, e.g.
+`vecmath.sincos`'s; `jax.custom_vjp`) are honoured, reverse mode transposes that rule, and
+values and derivatives under differentiation are `jax.vmap`'s (with its layout: the speed-up
+is the forward evaluation's). As under `jax.vmap`, JAX refuses `jax.jvp` through a
+`custom_vjp` function. Forward results equal `jax.vmap`'s up to float rounding (XLA may
+fuse in a different order; tested).
+
+On a GPU the layout question differs: XLA:GPU assigns layouts itself and emits transposes as
+tiled kernels, and its step is launch-bound (README "Performance"), so the CPU's transposed
+fusions may cost nothing there. Dropping `vmap_minor` for plain `jax.vmap` on a GPU would
+take: timing the PARS iteration (`experiments.bench_train`, 39- and 300-bus at the studies'
+N) with both on one GPU and JAX release (the GPU figures on record predate this module);
+if `jax.vmap` is as fast, choosing by backend in this module alone (`jax.default_backend()`
+not "cpu": `vmap_minor` returns `jax.vmap(fun, in_axes, out_axes)`, `first` is ignored and
+`batch_major` is a plain `jax.jit`, since `jax.vmap` keeps every batch first); and keeping the
+bitwise θ reference per backend (GPU results already differ from the CPU's by rounding).
+Callers need no change: `vmap_minor`'s contract is `jax.vmap`'s.
 """
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Sequence
+from contextvars import ContextVar
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
 from jax.extend import core
+from jax.extend.core import primitives
+from jax.interpreters import ad, mlir
+from jax.interpreters import batching as jax_batching
 
-ELEMENTWISE = frozenset("""
-abs acos acosh add and asin asinh atan atan2 atanh cbrt ceil clamp complex conj
-convert_element_type copy copy_p cos cosh div eq erf erf_inv erfc exp exp2 expm1 floor ge gt
-imag integer_pow is_finite le lgamma digamma log log1p logistic lt max min mul ne neg
-nextafter not or population_count pow real reduce_precision rem round rsqrt select_n
-shift_left shift_right_arithmetic shift_right_logical sign sin sinh sqrt square sub tan tanh
-xor optimization_barrier stop_gradient
-""".split())
+KNOWN_JAX = ((0, 10),)  # JAX releases (major, minor) `RULES` was checked against (the tests)
 
 FIRST = "first"  # the flag of a value kept batch-first (`vmap_minor`'s `first`)
 
-AXIS_PRESERVING = frozenset("""
-reduce_sum reduce_max reduce_min reduce_prod reduce_and reduce_or reduce_xor argmax argmin
-cumsum cumprod cummax cummin cumlogsumexp squeeze rev split
-""".split())
+# while `fallbacks` traces: {primitive name: times evaluated by the fallback}
+_FALLBACK_COUNTS: ContextVar[Counter | None] = ContextVar("vmap_minor_fallbacks",
+                                                          default=None)
 
 
 def vmap_minor(fun: Callable, in_axes: int | None | Sequence = 0, out_axes: int = 0,
@@ -91,11 +108,45 @@ def batch_last(fun: Callable, in_axes: int | None | Sequence = -1,
                    for x, b in zip(flat, flags)]
         closed, out_shape = jax.make_jaxpr(
             lambda *leaves: fun(*jax.tree.unflatten(tree, leaves)), return_shape=True)(*example)
-        outs = evaluate(closed.jaxpr, closed.consts, flat, flags, size)
-        return jax.tree.unflatten(jax.tree.structure(out_shape),
-                                  [_batched(x, b, size) for x, b in outs])
+        outs = _differentiable(closed.jaxpr, flags, size)(closed.consts, flat)
+        return jax.tree.unflatten(jax.tree.structure(out_shape), outs)
 
     return batched
+
+
+def fallbacks(fun: Callable, *args, in_axes: int | None | Sequence = 0,
+              first: bool | Sequence[bool] = False) -> dict[str, int]:
+    """{primitive name: times met} for the primitives of `vmap_minor(fun, in_axes,
+    first=first)(*args)` that no rule keeps batch-last (each evaluated as `jax.vmap` of that
+    primitive alone: correct, only slower). Traced, not run; nested `vmap_minor`s count."""
+    counts = Counter()
+    token = _FALLBACK_COUNTS.set(counts)
+    try:
+        jax.make_jaxpr(vmap_minor(fun, in_axes, first=first))(*args)
+    finally:
+        _FALLBACK_COUNTS.reset(token)
+    return dict(counts)
+
+
+def _differentiable(jaxpr, flags, size: int) -> Callable:
+    """(consts, args) -> `jaxpr`'s outputs, each with a trailing batch axis of `size`, for
+    args flagged `flags`: the batch-last evaluation, differentiated as `jax.vmap` of the
+    per-example program (see the module docstring), never through the primitives the
+    evaluation binds."""
+    axes = [0 if f is FIRST else -1 if f else None for f in flags]
+
+    @jax.custom_jvp
+    def run(consts, args):
+        return [_batched(x, b, size) for x, b in evaluate(jaxpr, consts, args, flags, size)]
+
+    @run.defjvp
+    def run_jvp(primals, tangents):
+        def one(consts, args):
+            return core.jaxpr_as_fun(core.ClosedJaxpr(jaxpr, consts))(*args)
+
+        return jax.jvp(jax.vmap(one, in_axes=(None, axes), out_axes=-1), primals, tangents)
+
+    return run
 
 
 def _flags_of_args(args, in_axes, first) -> list:
@@ -131,7 +182,7 @@ def evaluate(jaxpr, consts, args, flags, size: int):
             outs = _pairs(eqn, eqn.primitive.bind(
                 *vals, **eqn.primitive.get_bind_params(eqn.params)), False)
         else:
-            if FIRST in batched and eqn.primitive.name not in _PASS_FIRST:
+            if FIRST in batched and _RULE_OF.get(eqn.primitive) not in _PASS_FIRST:
                 vals, batched = zip(*map(_to_last, vals, batched))
             outs = _apply(eqn, list(vals), list(batched), size)
         for var, pair in zip(eqn.outvars, outs):
@@ -155,20 +206,15 @@ def _batched(x, flag, size: int):
 
 
 def _apply(eqn, vals, batched, size):
-    name, params = eqn.primitive.name, dict(eqn.params)
-    rule = _RULES.get(name)
-    if rule is not None:
-        return rule(eqn, vals, batched, size, **params)
-    if name in ELEMENTWISE:
-        return _elementwise(eqn, vals, batched, size, **params)
-    if name in AXIS_PRESERVING:
-        return _pairs(eqn, eqn.primitive.bind(*vals, **params))
-    return _fallback(eqn, vals, batched, size)
+    rule = _RULE_OF.get(eqn.primitive, _fallback)
+    return rule(eqn, vals, batched, size, **eqn.params)
 
 
-def _fallback(eqn, vals, batched, size):
+def _fallback(eqn, vals, batched, size, **_):
     """`jax.vmap` of the one primitive, with the batch moved to the front and back."""
-    FALLBACKS[eqn.primitive.name] = FALLBACKS.get(eqn.primitive.name, 0) + 1
+    counts = _FALLBACK_COUNTS.get()
+    if counts is not None:
+        counts[eqn.primitive.name] += 1
     params = eqn.primitive.get_bind_params(eqn.params)
     out = _batch_first(lambda *a: eqn.primitive.bind(*a, **params), vals, batched)
     return _pairs(eqn, out)
@@ -202,6 +248,12 @@ def _elementwise(eqn, vals, batched, size, **params):
 
     return _pairs(eqn, eqn.primitive.bind(
         *[conform(v, b, s) for v, b, s in zip(vals, batched, shapes)], **params))
+
+
+def _leading_axes(eqn, vals, batched, size, **params):
+    """A one-operand primitive whose parameters name the per-example axes it acts on: the
+    trailing batch axis rides along."""
+    return _pairs(eqn, eqn.primitive.bind(*vals, **params))
 
 
 def _broadcast_in_dim(eqn, vals, batched, size, shape, broadcast_dimensions, sharding):
@@ -317,19 +369,31 @@ def batch_major(fun: Callable) -> Callable:
 
     For per-example matrices (a policy's weights, one set per perturbed θ): XLA's batched
     product wants the batch as their leading axis, so batch-last weights are transposed at
-    every call; moved to the front at the call instead, a loop-invariant θ is moved once."""
-    def batch_major_call(*args):
-        return fun(*args)
+    every call; moved to the front at the call instead, a loop-invariant θ is moved once.
+    A `jax.jit` whose body starts with `_BATCH_MAJOR` (an identity) on its arguments."""
+    def marked(*args):
+        leaves, tree = jax.tree.flatten(args)
+        return fun(*jax.tree.unflatten(tree, _BATCH_MAJOR.bind(*leaves)))
 
-    return jax.jit(batch_major_call)
+    return jax.jit(marked)
+
+
+# The mark of a `batch_major` call's body: an identity on its operands, lowered to nothing.
+_BATCH_MAJOR = core.Primitive("batch_major")
+_BATCH_MAJOR.multiple_results = True
+_BATCH_MAJOR.def_impl(lambda *xs: xs)
+_BATCH_MAJOR.def_abstract_eval(lambda *avals: avals)
+mlir.register_lowering(_BATCH_MAJOR, lambda ctx, *xs: xs)
+jax_batching.primitive_batchers[_BATCH_MAJOR] = lambda xs, dims: (_BATCH_MAJOR.bind(*xs), dims)
+ad.primitive_jvps[_BATCH_MAJOR] = lambda xs, dxs: (_BATCH_MAJOR.bind(*xs), list(dxs))
 
 
 def _call(eqn, vals, batched, size, **params):
-    """pjit, closed_call, remat, custom_jvp_call, custom_vjp_call: evaluate the body
-    (`batch_major` functions: `jax.vmap` of it, the batch moved to the front and back)."""
+    """jit, closed_call, remat, custom_jvp_call, custom_vjp_call: evaluate the body
+    (`batch_major` calls: `jax.vmap` of it, the batch moved to the front and back)."""
     closed = _body(params)
-    if params.get("name") == "batch_major_call":
-        return [(o, True) for o in _batch_first(batch_major(core.jaxpr_as_fun(closed)),
+    if any(e.primitive is _BATCH_MAJOR for e in closed.jaxpr.eqns):
+        return [(o, True) for o in _batch_first(jax.jit(core.jaxpr_as_fun(closed)),
                                                  vals, batched)]
     return evaluate(closed.jaxpr, closed.consts, vals, batched, size)
 
@@ -341,17 +405,17 @@ def out_flags(jaxpr, flags) -> list:
     read = lambda v: False if isinstance(v, core.Literal) else env.get(v, False)  # noqa: E731
     for eqn in jaxpr.eqns:
         ins = [read(v) for v in eqn.invars]
-        name = eqn.primitive.name
+        rule = _RULE_OF.get(eqn.primitive)
         if not any(ins):
             outs = [False] * len(eqn.outvars)
-        elif name in _CALLS:
+        elif rule is _call:
             outs = out_flags(_body(eqn.params).jaxpr, ins)
-        elif name == "while":
+        elif rule is _while:
             outs, _ = _while_flags(eqn.params, ins)
-        elif name == "scan":
+        elif rule is _scan:
             carry, ys = _scan_flags(eqn.params, ins)
             outs = carry + ys
-        elif name == "cond":
+        elif rule is _cond:
             outs = _cond_flags(eqn.params, ins)
         else:
             outs = [True] * len(eqn.outvars)
@@ -360,7 +424,7 @@ def out_flags(jaxpr, flags) -> list:
 
 
 def _body(params):
-    closed = next(params[k] for k in ("jaxpr", "call_jaxpr", "fun_jaxpr") if k in params)
+    closed = next(params[k] for k in ("jaxpr", "call_jaxpr") if k in params)
     return closed if hasattr(closed, "consts") else core.ClosedJaxpr(closed, ())
 
 
@@ -471,9 +535,20 @@ def _cond(eqn, vals, batched, size, branches, **_):
             for outs in zip(*results)]
 
 
-FALLBACKS: dict = {}  # primitive name -> how many times it fell back to jax.vmap (tests)
-
-_RULES = {
+# The primitives with a batch-last rule, by their names in the JAX releases of `KNOWN_JAX`.
+RULES: dict[str, Callable] = {
+    **dict.fromkeys("""
+        abs acos acosh add and asin asinh atan atan2 atanh cbrt ceil clamp complex conj
+        convert_element_type copy cos cosh digamma div eq erf erf_inv erfc exp exp2 expm1 floor
+        ge gt imag integer_pow is_finite le lgamma log log1p logistic lt max min mul ne neg
+        nextafter not optimization_barrier or population_count pow real reduce_precision rem
+        round rsqrt select_n shift_left shift_right_arithmetic shift_right_logical sign sin
+        sinh sqrt square stop_gradient sub tan tanh xor""".split(), _elementwise),
+    **dict.fromkeys("""
+        argmax argmin cumlogsumexp cummax cummin cumprod cumsum reduce_and reduce_max
+        reduce_min reduce_or reduce_prod reduce_sum reduce_xor rev split squeeze""".split(),
+                    _leading_axes),
+    **dict.fromkeys("jit closed_call remat2 custom_jvp_call custom_vjp_call".split(), _call),
     "broadcast_in_dim": _broadcast_in_dim,
     "reshape": _reshape,
     "transpose": _transpose,
@@ -485,17 +560,7 @@ _RULES = {
     "gather": _gather,
     "scatter": _scatter,
     "scatter-add": _scatter,
-    "scatter_add": _scatter,
     "dot_general": _dot_general,
-    "pjit": _call,
-    "jit": _call,
-    "closed_call": _call,
-    "core_call": _call,
-    "remat": _call,
-    "checkpoint": _call,
-    "custom_jvp_call": _call,
-    "custom_vjp_call": _call,
-    "custom_vjp_call_jaxpr": _call,
     "while": _while,
     "scan": _scan,
     "cond": _cond,
@@ -504,5 +569,26 @@ _RULES = {
     "stack": lambda eqn, vals, batched, size, axis: [
         (jnp.stack([_batched(v, b, size) for v, b in zip(vals, batched)], axis), True)],
 }
-_CALLS = frozenset(k for k, v in _RULES.items() if v is _call)
-_PASS_FIRST = _CALLS | {"while", "scan", "cond"}  # hand FIRST values on to their bodies
+_PASS_FIRST = (_call, _while, _scan, _cond)  # hand FIRST values on to their bodies
+
+
+def _rules_of_this_jax(rules: dict) -> dict:
+    """`rules` keyed on this JAX's primitive objects (`jax.extend.core.primitives`,
+    `jax.lax`); ImportError for a JAX release not in `KNOWN_JAX` or a name it lacks."""
+    version = tuple(jax.__version_info__[:2])
+    known = ", ".join(".".join(map(str, v)) for v in KNOWN_JAX)
+    if version not in KNOWN_JAX:
+        raise ImportError(
+            f"jaxgrid.batching: JAX {jax.__version__} is not a release its primitive table "
+            f"was checked against ({known}.x): install one of those, or run "
+            "tests/test_batching.py on this one and add it to KNOWN_JAX")
+    found = {p.name: p for module in (primitives, lax) for p in vars(module).values()
+             if isinstance(p, core.Primitive)}
+    missing = sorted(set(rules) - set(found))
+    if missing:
+        raise ImportError(f"jaxgrid.batching: JAX {jax.__version__} has no primitive named "
+                          f"{', '.join(missing)}: RULES must be revised for it")
+    return {found[name]: rule for name, rule in rules.items()}
+
+
+_RULE_OF = _rules_of_this_jax(RULES)
