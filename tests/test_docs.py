@@ -79,12 +79,12 @@ def fenced_blocks(text: str):
     return blocks
 
 
-def logical_lines(start: int, lines: list[str]):
-    """(line number, text) with backslash continuations joined."""
+def logical_lines(numbered_lines):
+    """(line number, text) pairs with backslash continuations joined."""
     joined, first, parts = [], None, []
-    for number, line in enumerate(lines, start):
+    for number, line in numbered_lines:
         first = first or number
-        parts.append(line.rstrip().removesuffix("\\"))
+        parts.append(line.strip().removesuffix("\\"))
         if not line.rstrip().endswith("\\"):
             joined.append((first, " ".join(parts)))
             first, parts = None, []
@@ -151,7 +151,8 @@ def document_checks(path: Path):
     source, text, written = path.relative_to(ROOT).as_posix(), path.read_text(), []
     for language, start, lines in fenced_blocks(text):
         if language in SHELL_LANGUAGES:
-            yield from shell_checks(source, logical_lines(start, lines), written)
+            yield from shell_checks(source, logical_lines(enumerate(lines, start)),
+                                    written)
         elif language == "python":
             yield from python_checks(source, start, lines)
     prose = re.sub(r"```.*?```", "", text, flags=re.S)
@@ -162,14 +163,7 @@ def document_checks(path: Path):
 def makefile_recipes() -> list[tuple[int, str]]:
     """(line number, recipe line) of the Makefile, continuations joined, variables expanded."""
     lines = MAKEFILE.read_text().splitlines()
-    recipes = [(n, line) for n, line in enumerate(lines, 1) if line.startswith("\t")]
-    joined, pending = [], None
-    for number, line in recipes:
-        text = line.strip().removesuffix("\\")
-        pending = (pending[0], pending[1] + " " + text) if pending else (number, text)
-        if not line.rstrip().endswith("\\"):
-            joined.append(pending)
-            pending = None
+    joined = logical_lines((n, line) for n, line in enumerate(lines, 1) if line.startswith("\t"))
     expand = {"$(PY)": "python", "$(PYTHON)": "python3", "$(VENV)": ".venv"}
     return [(n, re.sub(r"\$\(\w+\)", lambda m: expand.get(m[0], m[0]), t)) for n, t in joined]
 
