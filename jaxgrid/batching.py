@@ -12,8 +12,9 @@ evaluated with each value either unbatched or batched along a trailing axis of s
 primitive has a rule keeping the batch last (elementwise ops broadcast their unbatched
 operands, gathers and scatters take the batch as one more window dimension, loops carry it).
 The primitives handled are declared in one table, `RULES`, checked at import against the
-installed JAX: a JAX release not in `KNOWN_JAX`, or one lacking a primitive of the table, is
-refused with an ImportError naming both. A primitive without a rule falls back to `jax.vmap`
+installed JAX: on a JAX release not in `KNOWN_JAX`, or one lacking a primitive of the table,
+the interpreter is refused with a `BatchingWarning` naming both, and `vmap_minor` is plain
+`jax.vmap` (correct, slower on CPU). A primitive without a rule falls back to `jax.vmap`
 of that primitive alone, moving the batch to the front and back (correct, only slower;
 `fallbacks` lists them for a given call).
 
@@ -46,6 +47,7 @@ Callers need no change: `vmap_minor`'s contract is `jax.vmap`'s.
 """
 from __future__ import annotations
 
+import warnings
 from collections import Counter
 from collections.abc import Callable, Sequence
 from contextvars import ContextVar
@@ -75,7 +77,10 @@ def vmap_minor(fun: Callable, in_axes: int | None | Sequence = 0, out_axes: int 
     arguments' leading axis is moved last on entry, and the outputs' last axis to
     `out_axes`. Arguments marked in `first` (per positional argument, or one for all) stay
     batch-first for the `batch_major` functions that read them (e.g. per-example policy
-    weights), and are moved where anything else reads them."""
+    weights), and are moved where anything else reads them. Plain `jax.vmap` when this JAX
+    is not one the primitive table was checked against (`REFUSED`)."""
+    if REFUSED:
+        return jax.vmap(fun, in_axes, out_axes)
     inner = batch_last(fun, in_axes, first)
 
     def batched(*args):
@@ -572,23 +577,29 @@ RULES: dict[str, Callable] = {
 _PASS_FIRST = (_call, _while, _scan, _cond)  # hand FIRST values on to their bodies
 
 
-def _rules_of_this_jax(rules: dict) -> dict:
-    """`rules` keyed on this JAX's primitive objects (`jax.extend.core.primitives`,
-    `jax.lax`); ImportError for a JAX release not in `KNOWN_JAX` or a name it lacks."""
+class BatchingWarning(UserWarning):
+    """`vmap_minor` cannot trust its primitive table on this JAX and runs as `jax.vmap`."""
+
+
+def _rules_of_this_jax(rules: dict) -> tuple[dict, str | None]:
+    """(`rules` keyed on this JAX's primitive objects (`jax.extend.core.primitives`,
+    `jax.lax`), None), or ({}, why) for a JAX release not in `KNOWN_JAX` or a name it lacks."""
     version = tuple(jax.__version_info__[:2])
     known = ", ".join(".".join(map(str, v)) for v in KNOWN_JAX)
     if version not in KNOWN_JAX:
-        raise ImportError(
-            f"jaxgrid.batching: JAX {jax.__version__} is not a release its primitive table "
-            f"was checked against ({known}.x): install one of those, or run "
-            "tests/test_batching.py on this one and add it to KNOWN_JAX")
+        return {}, (f"JAX {jax.__version__} is not a release its primitive table was checked "
+                    f"against ({known}.x): install one of those, or run "
+                    "tests/test_batching.py on this one and add it to KNOWN_JAX")
     found = {p.name: p for module in (primitives, lax) for p in vars(module).values()
              if isinstance(p, core.Primitive)}
     missing = sorted(set(rules) - set(found))
     if missing:
-        raise ImportError(f"jaxgrid.batching: JAX {jax.__version__} has no primitive named "
-                          f"{', '.join(missing)}: RULES must be revised for it")
-    return {found[name]: rule for name, rule in rules.items()}
+        return {}, (f"JAX {jax.__version__} has no primitive named {', '.join(missing)}: "
+                    "RULES must be revised for it")
+    return {found[name]: rule for name, rule in rules.items()}, None
 
 
-_RULE_OF = _rules_of_this_jax(RULES)
+_RULE_OF, REFUSED = _rules_of_this_jax(RULES)  # REFUSED: why vmap_minor is jax.vmap, or None
+if REFUSED:
+    warnings.warn(f"jaxgrid.batching: {REFUSED}; vmap_minor runs as jax.vmap (correct, "
+                  "slower on CPU)", BatchingWarning, stacklevel=2)
