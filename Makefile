@@ -16,19 +16,19 @@ run:  ## the main job on the built-in default case: PARS training on the 39-bus 
 test:  ## the test suite: test files shared by 2 workers, 2 simulated CPU devices each (tests/conftest.py)
 	$(PY) -m pytest -q -n 2 --dist loadfile
 
-bench:  ## benchmarks; figures go to bench_results/*.json
-	$(PY) -m experiments.bench_powerflow --out bench_results/powerflow.json
-	$(PY) -m experiments.bench_sim --out bench_results/sim.json
-	$(PY) -m experiments.bench_sim --cases ieee39_fidvr ieee300_fidvr --no-andes \
-		--batch-sizes 1 8 64 512 2048 --out bench_results/sim_fidvr.json
-	$(PY) -m experiments.bench_env --out bench_results/env.json
-	$(PY) -m experiments.bench_train --out bench_results/train.json
-	$(PY) -m experiments.bench_cmld --out bench_results/cmld.json
-	$(PY) -m experiments.bench_latency --out bench_results/latency.json
-	$(PY) -m experiments.profile_step --out bench_results/profile_step.json
-	$(PY) -m experiments.bench_vecmath --out bench_results/vecmath.json
-	$(PY) -m experiments.bench_speedup --rounds 1 --out bench_results/speedup.json
-	$(PY) -m experiments.bench_scale --out bench_results/scale.json
+bench:  ## benchmarks; figures go to benchmarks/cpu/*.json (GPU records: benchmarks/h100/)
+	$(PY) -m experiments.bench.powerflow --out benchmarks/cpu/powerflow.json
+	$(PY) -m experiments.bench.sim --out benchmarks/cpu/sim.json
+	$(PY) -m experiments.bench.sim --cases ieee39_fidvr ieee300_fidvr --no-andes \
+		--batch-sizes 1 8 64 512 2048 --out benchmarks/cpu/sim_fidvr.json
+	$(PY) -m experiments.bench.env --out benchmarks/cpu/env.json
+	$(PY) -m experiments.bench.train --out benchmarks/cpu/train.json
+	$(PY) -m experiments.bench.cmld --out benchmarks/cpu/cmld.json
+	$(PY) -m experiments.bench.latency --out benchmarks/cpu/latency.json
+	$(PY) -m experiments.bench.profile_step --out benchmarks/cpu/profile_step.json
+	$(PY) -m experiments.bench.vecmath --out benchmarks/cpu/vecmath.json
+	$(PY) -m experiments.bench.speedup --rounds 1 --out benchmarks/cpu/speedup.json
+	$(PY) -m experiments.bench.scale --out benchmarks/cpu/scale.json
 
 reproduce:  ## the paper's 39-bus figures and tables, REPORT.md in results/reproduce39
 	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.reproduce \
@@ -43,4 +43,4 @@ reproduce-pnnl300:  ## the paper's settings on the PNNL 300-bus study, results/p
 		--study studies/ieee300_pnnl.toml --out results/pnnl300
 
 clean:
-	rm -rf $(VENV) results bench_results .pytest_cache
+	rm -rf $(VENV) results benchmarks/cpu .pytest_cache

@@ -1,1 +1,2 @@
-"""Command-line experiments and benchmarks (python -m experiments.<name>)."""
+"""Command-line experiments (`python -m experiments.<name>`) and benchmarks
+(`python -m experiments.bench.<name>`)."""

@@ -3,7 +3,7 @@ small-step, many-sweep reference over the study's training tasks, without contro
 
     python -m experiments.step_accuracy --study ieee39_fidvr [--dts 0.002 0.005 0.01]
         [--sweeps 2] [--reference-dt 0.001] [--reference-sweeps 4] [--tasks train]
-        [--episode S] [--out bench_results/step_accuracy.json]
+        [--episode S] [--out benchmarks/cpu/step_accuracy.json]
 
 For each candidate it reports, over every task and agent step (0.1 s samples of the observed
 bus voltages, float32 time loop as in training): the 99th-percentile and largest |ΔV|
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--reference-sweeps", type=int, default=4)
     p.add_argument("--tasks", default="train", help="the study's task set")
     p.add_argument("--episode", type=float, help="s (default: the study's)")
-    p.add_argument("--out", default="bench_results/step_accuracy.json")
+    p.add_argument("--out", default="benchmarks/cpu/step_accuracy.json")
     args = p.parse_args(argv)
     try:
         study = study_from_args(args)

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from baselines.mpc import mpc_controller, parse_options
-from experiments.bench_sim import write_report
+from experiments.bench.timing import write_report
 from experiments.evaluate import no_control
 from experiments.studyargs import add_study_arguments, study_from_args
 from jaxgrid.study import rollout_specs

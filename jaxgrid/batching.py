@@ -3,7 +3,7 @@
 Why: `jax.vmap` puts the batch axis first. XLA:CPU then lays a device group's arrays out as
 (batch, slot), while the network product and XLA's gathers produce (slot, batch); the fusions
 between them read transposed and compile to scalar loops over a handful of slots
-(`experiments/profile_step.py`; README "Performance"). Interpreting the per-rollout program
+(`experiments/bench/profile_step.py`; README "Performance"). Interpreting the per-rollout program
 with the batch kept last makes every array (slot, ..., batch): one layout, loops over the
 batch that vectorise, no transposes.
 

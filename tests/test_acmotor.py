@@ -18,14 +18,14 @@ import numpy as np
 import pytest
 
 from conftest import raw_v33
+from experiments.simulate import main
 from jaxgrid.compile import CompileOptions, compile_model, with_precision
 from jaxgrid.dynamics import load_injection
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.models.acmotor import Acmtblu1, MotorOptions
 from jaxgrid.models.base import ModelError
-from jaxgrid.simulate import (FaultEvent, main, make_task, shed, simulate, simulate_batch,
-                              stack_tasks)
+from jaxgrid.simulate import FaultEvent, make_task, shed, simulate, simulate_batch, stack_tasks
 
 DT = 0.002  # s, the PNNL 39-bus step
 # The PNNL 39-bus ACMTBLU1 CONs (IEEE39bus_3AC.dyr), in CON order.

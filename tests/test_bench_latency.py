@@ -2,7 +2,7 @@
 figures themselves are measurements, not asserted)."""
 import json
 
-from experiments.bench_latency import main
+from experiments.bench.latency import main
 
 
 def test_every_controller_is_timed_on_its_own_observation(tmp_path):

@@ -13,7 +13,7 @@
 5. The original study's 300-bus files compile in strict mode and their task files' 46
    action buses `Bus<N>_loadBus` are load slots of the compiled model.
 The long runs (10-s faults on the 300-bus system, the 2000-bus case, speed) are in
-`experiments/bench_cmld.py`.
+`experiments/bench/cmld.py`.
 """
 from __future__ import annotations
 

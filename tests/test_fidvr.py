@@ -5,7 +5,7 @@ the study's: a motor bus still below the recovery level some seconds after clear
 (FIDVR), none without a fault, and load shedding after the fault speeds recovery.
 Run with -s to print the voltages each reading of the motor data gives. The InterPSS-era
 variant with WECC composite loads (CMLDBLU2) is tested in test_cmld.py and measured by
-experiments/bench_cmld.py.
+experiments/bench/cmld.py.
 """
 from __future__ import annotations
 

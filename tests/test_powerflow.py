@@ -19,10 +19,11 @@ import numpy as np
 import pytest
 
 from conftest import SHARED_CASES, andes_cases_dir
+from experiments.powerflow import main
 from jaxgrid import cases
 from jaxgrid.io.matpower import from_matpower, load_pypower_case
 from jaxgrid.io.raw import parse_raw, read_raw
-from jaxgrid.powerflow import PowerFlowOptions, admittance_matrix, bus_loads, main, solve
+from jaxgrid.powerflow import PowerFlowOptions, admittance_matrix, bus_loads, solve
 
 VM_TOL_STORED = 1e-3  # p.u., PSS/E's own convergence tolerance (see module docstring)
 VA_TOL_STORED = math.radians(0.6)  # the 300-bus 35 % file was solved loosely (0.48 deg)
@@ -252,7 +253,7 @@ def test_v23_loads_come_from_bus_records(shared_cases):
 
 
 def test_cli_json(tmp_path, shared_cases):
-    """python -m jaxgrid.powerflow --raw FILE --out pf.json: keys, RAW bus order, values."""
+    """python -m experiments.powerflow --raw FILE --out pf.json: keys, RAW bus order, values."""
     raw = shared_cases / "ieee39/baseCases/IEEE39bus_multiloads_xfmr4_smallX_v30_allload_per90.raw"
     out = tmp_path / "new_folder" / "pf.json"
     assert main(["--raw", str(raw), "--out", str(out)]) == 0

@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 
 from experiments.andes_reference import run_andes, trajectory_errors, write_psse_dyr
+from experiments.simulate import main
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.powerflow import PowerFlowOptions, solve
-from jaxgrid.simulate import (FaultEvent, LoadChange, main, make_task, rollout, simulate,
-                              simulate_batch, stack_tasks)
+from jaxgrid.simulate import (FaultEvent, LoadChange, make_task, rollout, simulate, simulate_batch,
+                              stack_tasks)
 from tests.conftest import andes_cases_dir
 
 T_END = 10.0

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments import bench_vecmath
+from experiments.bench import vecmath as bench_vecmath
 from jaxgrid import vecmath
 
 

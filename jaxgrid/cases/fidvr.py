@@ -79,7 +79,7 @@ import math
 import numpy as np
 
 from jaxgrid.case import SLACK, Case, build_case, to_rows
-from jaxgrid.cases import register
+from jaxgrid.cases.registry import register
 from jaxgrid.cases.ieee import ieee39, ieee300, move_loads_behind_transformers
 from jaxgrid.io.dyr import DyrData, DyrRecord
 from jaxgrid.models.acmotor import Acmtblu1

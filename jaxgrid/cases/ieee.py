@@ -20,7 +20,7 @@ import dataclasses
 from collections.abc import Mapping
 
 from jaxgrid.case import PQ, Case, build_case, to_rows
-from jaxgrid.cases import register
+from jaxgrid.cases.registry import register
 from jaxgrid.io.matpower import load_pypower_case
 
 STUDY_LOAD_BUSES_39 = (4, 7, 8, 18)

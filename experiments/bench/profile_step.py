@@ -1,7 +1,7 @@
 """Where one integration step's time goes: XLA kernel count and time per component.
 
-    python -m experiments.profile_step [--studies ieee39_fidvr ieee300_fidvr] [--batch 64]
-        [--calls 20] [--out bench_results/profile_step.json]
+    python -m experiments.bench.profile_step [--studies ieee39_fidvr ieee300_fidvr] [--batch 64]
+        [--calls 20] [--out benchmarks/cpu/profile_step.json]
 
 For a batch of the study's training tasks at its first operating point, during the fault,
 on one CPU device:
@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.bench_sim import _timed, write_report
+from experiments.bench.timing import timed, write_report
 from jaxgrid import network
 from jaxgrid.batching import batch_last
 from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, load_injection, solve_network,
@@ -69,8 +69,8 @@ def kernels(compiled_text: str) -> dict:
 
 def _best_us(fn, args, calls: int, rollout_steps: int) -> float:
     """µs per rollout-step: the best of `calls` warm calls of fn(*args)."""
-    _timed(lambda: fn(*args))
-    return 1e6 * min(_timed(lambda: fn(*args))[1] for _ in range(calls)) / rollout_steps
+    timed(lambda: fn(*args))
+    return 1e6 * min(timed(lambda: fn(*args))[1] for _ in range(calls)) / rollout_steps
 
 
 def profile(name: str, batch: int, calls: int) -> dict:
@@ -147,7 +147,7 @@ def main(argv=None) -> None:
     parser.add_argument("--studies", nargs="*", default=["ieee39_fidvr", "ieee300_fidvr"])
     parser.add_argument("--batch", type=int, default=64)
     parser.add_argument("--calls", type=int, default=10)
-    parser.add_argument("--out", default="bench_results/profile_step.json")
+    parser.add_argument("--out", default="benchmarks/cpu/profile_step.json")
     args = parser.parse_args(argv)
     jnp.zeros(())  # backend up before timing
     write_report(args.out, profiles=[profile(s, args.batch, args.calls) for s in args.studies])

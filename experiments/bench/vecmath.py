@@ -1,6 +1,6 @@
 """Cost per element of the step's elementary functions: XLA's own against `jaxgrid.vecmath`.
 
-    python -m experiments.bench_vecmath [--elements 14400] [--out bench_results/vecmath.json]
+    python -m experiments.bench.vecmath [--elements 14400] [--out benchmarks/cpu/vecmath.json]
 
 Each function runs 200 times in a compiled loop over a float32 (complex64 for the angle)
 array of `--elements` values, its output fed back into its input; the best of 5 calls gives
@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.bench_sim import _timed, write_report
+from experiments.bench.timing import timed, write_report
 from jaxgrid import vecmath
 
 LOOPS = 200
@@ -40,15 +40,15 @@ def ns_per_element(fn, n: int) -> float:
     """Best of 5 warm calls of LOOPS applications of fn to n elements, ns per element."""
     x0 = jnp.asarray(np.random.default_rng(0).uniform(0.5, 1.5, n), jnp.float32)
     looped = jax.jit(lambda x: jax.lax.fori_loop(0, LOOPS, lambda _, y: fn(y), x))
-    _timed(lambda: looped(x0))
-    return 1e9 * min(_timed(lambda: looped(x0))[1] for _ in range(5)) / (LOOPS * n)
+    timed(lambda: looped(x0))
+    return 1e9 * min(timed(lambda: looped(x0))[1] for _ in range(5)) / (LOOPS * n)
 
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--elements", type=int, default=14_400,
                         help="array size (default: 144 rollouts × 100 units)")
-    parser.add_argument("--out", default="bench_results/vecmath.json")
+    parser.add_argument("--out", default="benchmarks/cpu/vecmath.json")
     args = parser.parse_args(argv)
     timings = {name: round(ns_per_element(fn, args.elements), 3)
                for name, fn in FUNCTIONS.items()}

@@ -1,12 +1,12 @@
 """Scale figure: the 2000-bus synthetic Texas grid (ACTIVSg2000) with A/C motor loads.
 
-    python -m experiments.bench_scale [--batch-sizes 1 4 16 64] [--t-end 1.5]
-        [--out bench_results/scale.json]
+    python -m experiments.bench.scale [--batch-sizes 1 4 16 64] [--t-end 1.5]
+        [--out benchmarks/cpu/scale.json]
 
 `ACTIVSg2000.RAW` + `ACTIVSg2000_dyn_acmotor_zone3_v1.dyr` from ../shared/cases, compiled
 leniently: the unsupported models are dropped with the fallbacks `jaxgrid.compile` names,
 and machine records their model rejects (GENSAL with Xl = X''d) are dropped too
-(`bench_cmld.without_bad_machines`); both lists go into the JSON. The DYR's 1125 ACMTBLU1
+(`cmld.without_bad_machines`); both lists go into the JSON. The DYR's 1125 ACMTBLU1
 records name buses 10000 + N (the zone-3 loads behind transformers, as the PNNL 300-bus
 edit puts them on 20000 + N), which ACTIVSg2000.RAW does not have: each goes onto bus N's
 load with the same ID, without the transformer (`motors_on_raw_buses`; a speed figure,
@@ -26,9 +26,9 @@ import warnings
 
 import numpy as np
 
-from experiments.bench_cmld import SHARED, without_bad_machines
-from experiments.bench_sim import _timed, write_report
-from experiments.profile_step import profile_model
+from experiments.bench.cmld import SHARED, without_bad_machines
+from experiments.bench.timing import timed, write_report
+from experiments.bench.profile_step import profile_model
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import DyrData
 from jaxgrid.io.raw import read_raw
@@ -99,8 +99,8 @@ def bench(batch_sizes, t_end: float) -> dict:
         def run():
             return simulate_batch(model, tasks, t_end, DT, decimation=decimation).vm
 
-        vm, first = _timed(run)
-        warm = min(_timed(run)[1] for _ in range(2))
+        vm, first = timed(run)
+        warm = min(timed(run)[1] for _ in range(2))
         row = {"batch": batch, "first_call_s": round(first, 2),
                "s_per_simulated_s": round(warm / t_end, 3),
                "s_per_simulated_s_per_rollout": round(warm / t_end / batch, 4),
@@ -118,7 +118,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--batch-sizes", nargs="*", type=int, default=[1, 4, 16, 64])
     parser.add_argument("--t-end", type=float, default=1.5, help="s simulated per call")
-    parser.add_argument("--out", default="bench_results/scale.json")
+    parser.add_argument("--out", default="benchmarks/cpu/scale.json")
     args = parser.parse_args(argv)
     write_report(args.out, **bench(args.batch_sizes, args.t_end))
 

@@ -1,8 +1,8 @@
 """Decision latency: the time a controller takes to turn one observation into one action.
 
-    python -m experiments.bench_latency [--studies ieee39_fidvr ieee300_fidvr]
+    python -m experiments.bench.latency [--studies ieee39_fidvr ieee300_fidvr]
         [--batch 1024] [--calls 200] [--mpc "horizon=1,iterations=10"] [--mpc-batch 32]
-        [--out bench_results/latency.json]
+        [--out benchmarks/cpu/latency.json]
 
 For each study, the PARS policies (each kind on the observations the study stacks for it,
 `Study.history`; widths of the paper's preset for the grid's size,
@@ -30,7 +30,7 @@ from ars.pars import initial_carry, normalized_policy
 from ars.policies import Policy, PolicySpec
 from baselines.mpc import mpc_controller, parse_options
 from baselines.uvls import uvls_policy
-from experiments.bench_sim import write_report
+from experiments.bench.timing import write_report
 from experiments.train import paper_preset
 from jaxgrid.env import PlanInputs
 from jaxgrid.study import load_study
@@ -130,7 +130,7 @@ def main(argv=None) -> None:
     parser.add_argument("--calls", type=int, default=200)
     parser.add_argument("--mpc", default="", help="MPC options (baselines.mpc), e.g. horizon=1")
     parser.add_argument("--mpc-batch", type=int, default=32)
-    parser.add_argument("--out", default="bench_results/latency.json")
+    parser.add_argument("--out", default="benchmarks/cpu/latency.json")
     args = parser.parse_args(argv)
     write_report(args.out, paper_s={"pars": 0.72, "mpc": 63.31},
                  studies=[bench_study(s, args.batch, args.calls, args.mpc, args.mpc_batch)

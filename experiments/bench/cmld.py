@@ -1,6 +1,6 @@
 """WECC composite loads (CMLDBLU2) on the original study's files: FIDVR figures and speed.
 
-    python -m experiments.bench_cmld [--out bench_results/cmld.json] [--skip-2000]
+    python -m experiments.bench.cmld [--out benchmarks/cpu/cmld.json] [--skip-2000]
 
 1. IEEE 300 (`IEEE300Bus_modified_noHVDC_v2.raw` + `IEEE300_dyn_cmld_zone1.dyr`, strict,
    dt 2 ms as the study's InterPSS configuration, 10 s): a flat run (largest |ΔV| over all
@@ -40,7 +40,7 @@ from jaxgrid.models.machines import MACHINES
 from jaxgrid.io.raw import read_raw
 from jaxgrid.simulate import FaultEvent, make_task, simulate_batch, stack_tasks
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "cases"
+SHARED = Path(__file__).resolve().parents[3] / "shared" / "cases"
 IEEE300 = SHARED / "ieee300"
 TASK_FILE = IEEE300 / ("IEEE300_RL_loadShedding_zone1_continuous_LSTM_new_lessfaultbuses_"
                        "moreActionBuses_multipfcases.json")
@@ -194,7 +194,7 @@ def speed(model, batch: int = BATCH) -> dict:
 
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="bench_results/cmld.json")
+    parser.add_argument("--out", default="benchmarks/cpu/cmld.json")
     parser.add_argument("--skip-2000", action="store_true", help="leave out ACTIVSg2000")
     parser.add_argument("--speed-only", action="store_true",
                         help="only the composite-vs-static cost per step (section 3)")

@@ -1,9 +1,9 @@
 """Training benchmark: seconds per PARS iteration and rollouts per second, by study and
 device count.
 
-    python -m experiments.bench_train [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
+    python -m experiments.bench.train [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
         [--devices 1 2] [--directions N ...] [--task-batch M] [--repeats 2]
-        [--out bench_results/train.json]
+        [--out benchmarks/cpu/train.json]
 
 Each built-in study runs with the defaults of its training command (LSTM; 39-bus N = 16,
 b = 8; 300-bus N = 128, b = 64; m = 9 tasks, 10 s episodes), so an iteration is 2·N·m
@@ -15,23 +15,18 @@ the batch: N directions make 2·N·m rollouts per iteration (b = N/2). The first
 """
 from __future__ import annotations
 
-import os
+import argparse
+import time
 
-os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
-                           + " --xla_force_host_platform_device_count=2").strip()
+import jax
+import numpy as np
+from jax.sharding import Mesh
 
-import argparse  # noqa: E402
-import time  # noqa: E402
-
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
-from jax.sharding import Mesh  # noqa: E402
-
-from ars.pars import ParsConfig, init_state  # noqa: E402
-from experiments import train, train_39bus, train_300bus  # noqa: E402
-from experiments.bench_sim import _timed, write_report  # noqa: E402
-from experiments.train import build  # noqa: E402
-from jaxgrid.study import load_study  # noqa: E402
+from ars.pars import ParsConfig, init_state
+from experiments import train, train_39bus, train_300bus
+from experiments.bench.timing import timed, write_report
+from experiments.train import build
+from jaxgrid.study import load_study
 
 DEFAULTS = {"ieee39_fidvr": train_39bus.DEFAULTS, "ieee300_fidvr": train_300bus.DEFAULTS}
 PLAIN = train.DEFAULTS
@@ -67,10 +62,10 @@ def bench_case(case: str, device_counts, repeats: int, task_batch: int | None = 
             def step():
                 return trainer.iteration(state, *data)
 
-            (state, _), first = _timed(step)
+            (state, _), first = timed(step)
             warm = []
             for _ in range(repeats):
-                (state, metrics), wall = _timed(step)
+                (state, metrics), wall = timed(step)
                 warm.append(wall)
             row = {"directions": config.directions, "top": config.top,
                    "rollouts_per_iteration": rollouts, "devices": n_dev,
@@ -94,7 +89,7 @@ def main(argv=None) -> None:
     parser.add_argument("--directions", nargs="*", type=int, default=[None],
                         help="direction counts N to sweep, top b = N/2 (default: the "
                              "training command's)")
-    parser.add_argument("--out", default="bench_results/train.json")
+    parser.add_argument("--out", default="benchmarks/cpu/train.json")
     args = parser.parse_args(argv)
     if max(args.devices) > len(jax.devices()):
         parser.error(f"--devices {max(args.devices)}: only {len(jax.devices())} available")

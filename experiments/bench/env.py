@@ -1,7 +1,7 @@
 """Environment benchmark: batched agent steps per second of FIDVR studies.
 
-    python -m experiments.bench_env [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
-        [--batch-sizes 1 16 128 512] [--devices 1 2] [--out bench_results/env.json]
+    python -m experiments.bench.env [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
+        [--batch-sizes 1 16 128 512] [--devices 1 2] [--out benchmarks/cpu/env.json]
 
 Each rollout is a whole 10 s episode (100 agent steps of 0.1 s) of `LoadSheddingEnv.rollout`
 with a controller that never sheds, on training-set faults cycled over the batch; the batch
@@ -10,18 +10,13 @@ best warm wall time.
 """
 from __future__ import annotations
 
-import os
+import argparse
 
-os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
-                           + " --xla_force_host_platform_device_count=2").strip()
+import jax
 
-import argparse  # noqa: E402
-
-import jax  # noqa: E402
-
-from experiments.bench_sim import sharded_timings, write_report  # noqa: E402
-from experiments.evaluate import no_control  # noqa: E402
-from jaxgrid.study import load_study  # noqa: E402
+from experiments.bench.timing import sharded_timings, write_report
+from experiments.evaluate import no_control
+from jaxgrid.study import load_study
 
 
 def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
@@ -54,7 +49,7 @@ def main(argv=None) -> None:
     parser.add_argument("--batch-sizes", nargs="*", type=int, default=[1, 16, 128, 512])
     parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
     parser.add_argument("--repeats", type=int, default=1)
-    parser.add_argument("--out", default="bench_results/env.json")
+    parser.add_argument("--out", default="benchmarks/cpu/env.json")
     args = parser.parse_args(argv)
     write_report(args.out, cases=[bench_case(c, args.batch_sizes, args.devices, args.repeats)
                                   for c in args.studies])

@@ -1,7 +1,7 @@
 """Simulation benchmark: batched 10 s fault rollouts vs batch size and device count, vs ANDES.
 
-    python -m experiments.bench_sim [--cases ieee39 npcc] [--batch-sizes 1 4 16 64 256 1024]
-                                    [--devices 1 2] [--out bench_results/sim.json]
+    python -m experiments.bench.sim [--cases ieee39 npcc] [--batch-sizes 1 4 16 64 256 1024]
+                                    [--devices 1 2] [--out benchmarks/cpu/sim.json]
 
 Cases: `ieee39` is the PNNL 39-bus file (../shared/cases, motor loads left out), `npcc` the
 140-bus NPCC case that ANDES ships, `ieee300` the PNNL 300-bus file; `ieee39_fidvr` and
@@ -18,33 +18,27 @@ of the slot count.
 """
 from __future__ import annotations
 
+import argparse
 import os
+import tempfile
+import time
+import warnings
+from pathlib import Path
 
-os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
-                           + " --xla_force_host_platform_device_count=2").strip()
+import jax
+import numpy as np
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import platform  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-import warnings  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
-from jax.sharding import Mesh, NamedSharding, PartitionSpec  # noqa: E402
-
-from experiments.andes_reference import run_andes, write_psse_dyr  # noqa: E402
-from jaxgrid import network  # noqa: E402
-from jaxgrid.compile import CompileOptions, compile_model  # noqa: E402
-from jaxgrid.io.dyr import read_dyr  # noqa: E402
-from jaxgrid.io.raw import read_raw  # noqa: E402
-from jaxgrid.study import builtin  # noqa: E402
-from jaxgrid.simulate import (FaultEvent, heun_step, make_task, simulate_batch,  # noqa: E402
+from experiments.andes_reference import run_andes, write_psse_dyr
+from experiments.bench.timing import sharded_timings, write_report
+from jaxgrid import network
+from jaxgrid.compile import CompileOptions, compile_model
+from jaxgrid.io.dyr import read_dyr
+from jaxgrid.io.raw import read_raw
+from jaxgrid.study import builtin
+from jaxgrid.simulate import (FaultEvent, heun_step, make_task, simulate_batch,
                               stack_tasks)
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "cases"
+SHARED = Path(__file__).resolve().parents[3] / "shared" / "cases"
 T_END, DT, SAMPLE = 10.0, 0.005, 0.1  # s
 LOAD_BUSES = ()  # no controllable loads in the file cases: see the module docstring
 STUDY_CASES = ("ieee39_fidvr", "ieee300_fidvr")
@@ -63,41 +57,6 @@ CASES = {  # name: (raw, dyr, models dropped for both simulators)
     "ieee300": (lambda: SHARED / "ieee300/IEEE300Bus_modified_noHVDC_v2.raw",
                 lambda: SHARED / "ieee300/IEEE300_genrou_exdc1_tgov1_zone1ac.dyr", ("USRLOD",)),
 }
-
-
-def write_report(path: str, **fields) -> None:
-    """Write the benchmark JSON: machine, JAX version, backend, device kind and count, then
-    `fields`; say where it went."""
-    report = {"machine": platform.processor() or platform.machine(), "jax": jax.__version__,
-              "backend": jax.default_backend(), "device_kind": jax.devices()[0].device_kind,
-              "devices": len(jax.devices()), **fields}
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text(json.dumps(report, indent=2))
-    print(f"wrote {path}")
-
-
-def _timed(fn):
-    start = time.perf_counter()
-    out = jax.block_until_ready(fn())
-    return out, time.perf_counter() - start
-
-
-def sharded_timings(batch_sizes, device_counts, repeats: int, make_tasks, run):
-    """Time `run(tasks)` with `make_tasks(batch)` sharded over a 1-D mesh of the first n
-    devices, for every device count n and every batch size n divides.
-
-    Yields (n, batch, output of the first call, first-call s, best of `repeats` warm calls s).
-    """
-    for n_dev in device_counts:
-        sharding = NamedSharding(Mesh(np.array(jax.devices()[:n_dev]), ("batch",)),
-                                 PartitionSpec("batch"))
-        for batch in batch_sizes:
-            if batch % n_dev:
-                continue
-            tasks = jax.device_put(make_tasks(batch), sharding)
-            out, first = _timed(lambda: run(tasks))
-            warm = min(_timed(lambda: run(tasks))[1] for _ in range(repeats))
-            yield n_dev, batch, out, first, warm
 
 
 def step_compile_seconds(model, dt: float) -> float:
@@ -173,7 +132,7 @@ def main(argv=None) -> None:
     parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--no-andes", action="store_true", help="skip the ANDES comparison")
-    parser.add_argument("--out", default="bench_results/sim.json")
+    parser.add_argument("--out", default="benchmarks/cpu/sim.json")
     args = parser.parse_args(argv)
     write_report(args.out, t_end_s=T_END, sample_every_s=SAMPLE,
                  cases=[bench_case(c, args.batch_sizes, args.devices, args.repeats,

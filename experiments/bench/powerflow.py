@@ -1,6 +1,6 @@
 """Power-flow benchmark: compile and solve times per case, written as JSON.
 
-    python -m experiments.bench_powerflow [--raw FILE ...] [--out bench_results/powerflow.json]
+    python -m experiments.bench.powerflow [--raw FILE ...] [--out benchmarks/cpu/powerflow.json]
 
 Without --raw it times the built-in cases and, when ../shared/cases is beside
 the repository, the PNNL 2000-bus ACTIVSg2000 file. The first solve includes
@@ -21,7 +21,7 @@ from jaxgrid import cases
 from jaxgrid.io.raw import read_raw
 from jaxgrid.powerflow import PowerFlowOptions, solve
 
-DEFAULT_RAW = Path(__file__).resolve().parents[2] / "shared/cases/activsg2000/ACTIVSg2000.RAW"
+DEFAULT_RAW = Path(__file__).resolve().parents[3] / "shared/cases/activsg2000/ACTIVSg2000.RAW"
 
 
 def time_case(case, repeats: int) -> dict:
@@ -46,7 +46,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--raw", nargs="*", default=None, help="RAW files to time")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", default="bench_results/powerflow.json")
+    parser.add_argument("--out", default="benchmarks/cpu/powerflow.json")
     args = parser.parse_args(argv)
     targets = [cases.load(name) for name in ("ieee39", "ieee300")]
     raws = args.raw if args.raw is not None else ([DEFAULT_RAW] if DEFAULT_RAW.is_file() else [])

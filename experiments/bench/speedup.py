@@ -1,14 +1,17 @@
 """Training speed of this code against an earlier commit, measured in the same run.
 
-    python -m experiments.bench_speedup [--baseline cae8d39] [--studies ieee39_fidvr
-        ieee300_fidvr] [--devices 1 2] [--rounds 2] [--repeats 2] [--out bench_results/speedup.json]
+    python -m experiments.bench.speedup [--baseline cae8d39] [--studies ieee39_fidvr
+        ieee300_fidvr] [--devices 1 2] [--rounds 2] [--repeats 2]
+        [--out benchmarks/cpu/speedup.json]
 
-The baseline commit is checked out in a temporary git worktree; its `experiments.bench_train`
-and this tree's run one after the other, as fresh processes, alternating `--rounds` times per
-(study, device count), so the machine's drift (±25 % here between runs) falls on both. Each
-side runs its own defaults for the built-in study (step size, sweeps) with the same work per
-iteration (the training command's N, b, m = 9 tasks, 10 s episodes; see bench_train). The
-figure is the best s/iteration of each side and their ratio baseline / this.
+The baseline commit is checked out in a temporary git worktree; its training benchmark
+(`experiments.bench_train` before the benchmarks moved to `experiments/bench/`) and this
+tree's `experiments.bench.train` run one after the other, as fresh processes, alternating
+`--rounds` times per (study, device count), so the machine's drift (±25 % here between runs)
+falls on both. Each side runs its own defaults for the built-in study (step size, sweeps)
+with the same work per iteration (the training command's N, b, m = 9 tasks, 10 s episodes;
+see `experiments.bench.train`). The figure is the best s/iteration of each side and their
+ratio baseline / this.
 """
 from __future__ import annotations
 
@@ -20,20 +23,24 @@ import sys
 import tempfile
 from pathlib import Path
 
-from experiments.bench_sim import write_report
+from experiments.bench.timing import write_report
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 BASELINE = "cae8d39"  # the code before the performance issue (15)
 
 
 def bench_train_row(tree: Path, study: str, devices: int, repeats: int, out: Path) -> dict:
-    """One `experiments.bench_train` run of the tree at `tree` in a fresh process: its case
+    """One run of the training benchmark of the tree at `tree` in a fresh process: its case
     (runs, each with rollouts_per_iteration).
 
-    Commits before the studies-as-data change name a built-in study `--cases`."""
-    flag = "--studies" if "--studies" in (tree / "experiments/bench_train.py").read_text() \
-        else "--cases"
-    subprocess.run([sys.executable, "-m", "experiments.bench_train", flag, study,
+    Commits before the benchmarks moved to `experiments/bench/` name it
+    `experiments.bench_train`; those before the studies-as-data change name a built-in study
+    `--cases`."""
+    module = "experiments.bench.train" if (tree / "experiments/bench/train.py").is_file() \
+        else "experiments.bench_train"
+    source = tree / (module.replace(".", "/") + ".py")
+    flag = "--studies" if "--studies" in source.read_text() else "--cases"
+    subprocess.run([sys.executable, "-m", module, flag, study,
                     "--devices", str(devices), "--repeats", str(repeats), "--out", str(out)],
                    cwd=tree, check=True, env={**os.environ, "PYTHONPATH": str(tree)})
     return json.loads(out.read_text())["cases"][0]
@@ -75,7 +82,7 @@ def main(argv=None) -> None:
     parser.add_argument("--devices", nargs="*", type=int, default=[1, 2])
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=2, help="warm iterations per run")
-    parser.add_argument("--out", default="bench_results/speedup.json")
+    parser.add_argument("--out", default="benchmarks/cpu/speedup.json")
     args = parser.parse_args(argv)
     write_report(args.out, baseline=args.baseline,
                  rows=speedup(args.baseline, args.studies, args.devices, args.rounds,

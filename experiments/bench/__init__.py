@@ -1,0 +1,13 @@
+"""Benchmarks, one command each: `python -m experiments.bench.<name>`.
+
+`make bench` writes their JSON reports to benchmarks/cpu/; the GPU records are kept beside
+it in benchmarks/h100/. `timing` holds what they share: the timer, the device sweep and the
+report writer.
+
+Importing the package asks XLA for two host CPU devices, so that a benchmark can shard its
+batch over 1 and 2 devices; this runs before any benchmark module imports JAX.
+"""
+import os
+
+os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                           + " --xla_force_host_platform_device_count=2").strip()
