@@ -3,8 +3,8 @@
 Why: `jax.vmap` puts the batch axis first. XLA:CPU then lays a device group's arrays out as
 (batch, slot), while the network product and XLA's gathers produce (slot, batch); the fusions
 between them read transposed and compile to scalar loops over a handful of slots
-(`experiments/bench/profile_step.py`; README "Performance"). Interpreting the per-rollout program
-with the batch kept last makes every array (slot, ..., batch): one layout, loops over the
+(`experiments/bench/profile_step.py`; docs/performance.md). Interpreting the per-rollout
+program with the batch kept last makes every array (slot, ..., batch): one layout, loops over the
 batch that vectorise, no transposes.
 
 How: the function is traced once per call for one example (`jax.make_jaxpr`) and its jaxpr
@@ -35,7 +35,7 @@ is the forward evaluation's). As under `jax.vmap`, JAX refuses `jax.jvp` through
 fuse in a different order; tested).
 
 On a GPU the layout question differs: XLA:GPU assigns layouts itself and emits transposes as
-tiled kernels, and its step is launch-bound (README "Performance"), so the CPU's transposed
+tiled kernels, and its step is launch-bound (docs/performance.md), so the CPU's transposed
 fusions may cost nothing there. Dropping `vmap_minor` for plain `jax.vmap` on a GPU would
 take: timing the PARS iteration (`experiments.bench_train`, 39- and 300-bus at the studies'
 N) with both on one GPU and JAX release (the GPU figures on record predate this module);

@@ -7,7 +7,7 @@ injection can change (ZIP parts that are not constant Z, load shedding). A slot 
 then a matrix-vector product; nonlinear injections are resolved by a fixed number of
 fixed-point sweeps warm-started from the previous voltages. The two products that run every
 sweep are real 2×2-block products ([Re −Im; Im Re] acting on [Re; Im]): measured 3× faster
-than the complex64 product on CPU (`experiments/bench/profile_step.py`, README "Performance").
+than the complex64 product on CPU (`experiments/bench/profile_step.py`, docs/performance.md).
 
 A three-phase fault at bus f with impedance z_f is the rank-one update
 Z − Z[:, f] Z[f, :] / (Z[f, f] + z_f); the fault bus is data, so tasks with different

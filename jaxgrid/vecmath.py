@@ -2,8 +2,8 @@
 
 XLA:CPU evaluates `jnp.sin`, `jnp.cos`, `jnp.power` and `jnp.angle` one element at a
 time: 1.5–14 ns per float32 element on the development machine, against 0.05 for a
-multiply and 0.3 for `jnp.exp`, which it vectorises (`experiments.bench.vecmath`; README
-"Performance"). The step's rotor-frame rotations and load characteristics therefore use:
+multiply and 0.3 for `jnp.exp`, which it vectorises (`experiments.bench.vecmath`;
+docs/performance.md). The step's rotor-frame rotations and load characteristics therefore use:
 - `sincos`: the argument reduced by π/2 in three parts (Cody–Waite), then the Cephes
   single-precision minimax polynomials on [−π/4, π/4]: 0.6–0.9 ns per element for both.
   Largest error against float64 over |x| ≤ 1000 rad: 9e-8 (jnp.sin: 3e-8; float32 rounding

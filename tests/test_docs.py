@@ -23,16 +23,6 @@ from pathlib import Path
 
 import pytest
 
-# Modules the docs already name by the layout of issue 27 but which another branch creates;
-# their checks are expected to fail until that branch is merged. Empty this set at the merge.
-PENDING = {
-    "experiments.powerflow", "experiments.simulate", "experiments.bench",
-    "experiments.bench.sim", "experiments.bench.env", "experiments.bench.train",
-    "experiments.bench.cmld", "experiments.bench.latency", "experiments.bench.powerflow",
-    "experiments.bench.scale", "experiments.bench.speedup", "experiments.bench.vecmath",
-    "experiments.bench.profile_step",
-}
-
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 MAKEFILE = ROOT / "Makefile"
@@ -176,15 +166,8 @@ CHECKS = [c for path in DOCS for c in document_checks(path)] + list(
     shell_checks("Makefile", makefile_recipes(), []))
 
 
-def pending(check: Check) -> bool:
-    return check.module in PENDING
-
-
 def params(kinds):
-    return [pytest.param(c, id=c.key[:120],
-                         marks=[pytest.mark.xfail(strict=True, reason="renamed in another "
-                                                  "branch of issue 27")] if pending(c) else [])
-            for c in CHECKS if c.kind in kinds]
+    return [pytest.param(c, id=c.key[:120]) for c in CHECKS if c.kind in kinds]
 
 
 CHECKER = r'''

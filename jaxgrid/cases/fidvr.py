@@ -191,7 +191,7 @@ class StudyCase:
       dt: integration step of the study, s.
       sweeps: network fixed-point sweeps per solution. dt and sweeps are the fastest pair
         accurate to p99 |ΔV| <= 1e-3 p.u. against a float64 1-ms 4-sweep reference
-        (`experiments.step_accuracy`, README "Step size by accuracy").
+        (`experiments.step_accuracy`, docs/studies.md "Step size by accuracy").
       load_level: factor on every load and generator dispatch (1 = the base case).
       description: one paragraph on how the case was built.
       reward: the study's `jaxgrid.env.EnvParams` values by field name.
