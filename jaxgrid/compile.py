@@ -21,13 +21,14 @@ import numpy as np
 
 from jaxgrid import network
 from jaxgrid.case import ISOLATED, PQ, Case
-from jaxgrid.dynamics import derivatives, update_loads
+from jaxgrid.dynamics import FAMILIES, derivatives, update_loads
 from jaxgrid.grid import DeviceGroup, GridModel, GridState
 from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
 from jaxgrid.models.acmotor import LOAD_MOTORS, MotorOptions
-from jaxgrid.models.base import ExciterInputs, LoadSite, ModelError, device_label
-from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, expand, run_model
-from jaxgrid.models.exciters import EXCITERS
+from jaxgrid.models.base import LoadSite, ModelError, device_label
+from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, run_model
+from jaxgrid.models.cmld_init import expand
+from jaxgrid.models.exciters import EXCITERS, ExciterPorts
 from jaxgrid.models.governors import GOVERNORS
 from jaxgrid.models.induction import INDUCTION_MOTORS
 from jaxgrid.models.loads import LoadSplit, split_bus_loads
@@ -109,7 +110,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     """A GridModel for `case` at its power-flow point with the dynamic models of `dyr`.
 
     Composite loads (CMLDBLU1/2) first add their low-side and load buses to the case
-    (`jaxgrid.models.cmld.expand`); the model's buses are then the RAW buses followed by
+    (`jaxgrid.models.cmld_init.expand`); the model's buses are then the RAW buses followed by
     those internal buses, named in `GridModel.bus_names`.
 
     Raises DyrError (unsupported models, strict) or ModelError (bad CONs, naming file,
@@ -153,13 +154,12 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
         efd0, pm0, xadifd = (np.concatenate(a) for a in (efd0, pm0, xadifd))
         exciters, e_states = _controller_groups(
             case, records["exciter"], EXCITERS, keys, position,
-            lambda model, p, k: model.init(p, jnp.asarray(efd0[k]), ExciterInputs(
+            lambda model, p, k: model.init(p, jnp.asarray(efd0[k]), ExciterPorts(
                 ec=jnp.abs(jnp.asarray(vt0[k])), vt=jnp.asarray(vt0[k]), it=jnp.asarray(i0[k]),
                 xadifd=jnp.asarray(xadifd[k]), dw=jnp.zeros(len(k)))))
         governors, g_states = _controller_groups(
             case, records["governor"], GOVERNORS, keys, position,
             lambda model, p, k: model.init(p, jnp.asarray(pm0[k])))
-    _report_model_notes(case, groups, exciters + governors, notes)
 
     z_source = np.concatenate([g.params["ra"] + 1j * g.params["xs"] for g in machines])
     y_norton = ratio / z_source
@@ -191,6 +191,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     load_groups = tuple(
         DeviceGroup(params=m.params, model=m.model, index=tuple(slot_of[int(b)] for b in m.buses),
                     labels=m.labels) for m in motors)
+    _report_model_notes(case, tuple(machines) + exciters + governors + load_groups, notes)
 
     model = GridModel(
         machines=tuple(machines), exciters=exciters, governors=governors, loads=load_groups,
@@ -312,12 +313,10 @@ def _classify(dyr: DyrData, case: Case, strict: bool, notes: list[str]) -> dict[
     return out
 
 
-def _report_model_notes(case: Case, machine_groups, controllers, notes: list[str]) -> None:
-    """Every model's `notes` (approximations, dropped data) into the compile report, with
-    one ModelWarning naming them."""
-    remarks = [line for model, units, params in machine_groups
-               for line in model.notes(params, _labels(case, model.name, units))]
-    remarks += [line for g in controllers for line in g.model.notes(g.params, g.labels)]
+def _report_model_notes(case: Case, groups, notes: list[str]) -> None:
+    """Every device group's `notes` (approximations, dropped data), whatever its family,
+    into the compile report, with one ModelWarning naming them."""
+    remarks = [line for g in groups for line in g.model.notes(g.params, g.labels)]
     if remarks:
         warnings.warn(f"{case.source}: {len(remarks)} model note(s): " + "; ".join(remarks[:10])
                       + ("; ..." if len(remarks) > 10 else ""), ModelWarning, stacklevel=3)
@@ -341,8 +340,8 @@ def _check_values(model: GridModel, precision: str) -> None:
         flagged = np.flatnonzero(~np.isfinite(a) | (np.abs(a) > limit))
         return int(flagged[0]) if flagged.size else None
 
-    for family in (model.machines, model.exciters, model.governors, model.loads):
-        for g in family:
+    for family in FAMILIES:
+        for g in getattr(model, family):
             for name, values in g.params.items():
                 k = first_bad(values)
                 if k is not None:
@@ -502,10 +501,8 @@ def _check_initial_state(model: GridModel, tolerance: float, notes: list[str]) -
         fault = network.fault_view(model.network, 0, 1.0)
         rates, v, _ = derivatives(model, x0, fault, 0.0)
         problems = []
-        for groups, drift, states in zip(
-                (model.machines, model.exciters, model.governors, model.loads), rates,
-                x0.integrated()):
-            for g, dx, x in zip(groups, drift, states):
+        for family, drift, states in zip(FAMILIES, rates, x0.integrated()):
+            for g, dx, x in zip(getattr(model, family), drift, states):
                 for name, rate in dx.items():
                     rate = np.abs(np.asarray(rate))
                     for u in np.flatnonzero(rate > tolerance):

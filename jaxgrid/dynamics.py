@@ -2,9 +2,9 @@
 
 Order of one evaluation (spec §0 initialisation order, run forwards):
 machine EMFs -> Norton sources -> network (with fault, static loads and load models, all
-scaled by the connected fraction) -> machine currents -> exciters (EFD) -> governors (Pm)
--> machine and load-model derivatives. Once per accepted step `update_loads` advances the
-load models' discrete logic.
+scaled by the connected fraction) -> machine currents (`Signals`) -> one loop over the
+device families: exciters (EFD) -> governors (Pm) -> machine and load-model derivatives.
+Once per accepted step `update_loads` advances the load models' discrete logic.
 """
 from __future__ import annotations
 
@@ -17,10 +17,14 @@ import jax.numpy as jnp
 from jaxgrid import network
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.models import loads
-from jaxgrid.models.base import ExciterInputs
+from jaxgrid.models.base import Signals
 from jaxgrid.vecmath import sincos
 
 PHI_SERIES_BELOW = 0.5  # |λ·dt| below which φ1, φ2 come from their Taylor series
+FAMILIES = ("machines", "exciters", "governors", "loads")  # GridModel/GridState fields
+# Evaluation order: each family reads what the earlier ones wrote (exciters EFD, governors
+# Pm, both read by the machines)
+CAUSAL_ORDER = ("exciters", "governors", "machines", "loads")
 
 
 def _index(group):
@@ -69,17 +73,9 @@ def solve_network(model: GridModel, x: GridState, fault: network.Fault, active,
     return v, current, residual, emf
 
 
-def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
-    """Time derivatives of every integrated state.
-
-    Args:
-      x: current state; fault/active: the task's fault and whether it is on (0/1).
-    Returns:
-      (dx, v, residual): dx a tuple (machines, exciters, governors, loads) of {state: rate}
-      dicts mirroring x.integrated(); v (n_slot,) the slot voltages; residual the network
-      fixed-point residual.
-    """
-    v, _, residual, emf = solve_network(model, x, fault, active)
+def machine_signals(model: GridModel, x: GridState, v, emf) -> Signals:
+    """The model-wide `Signals` at slot voltages v (n_slot,) and EMFs emf (n_gen,): the
+    machines' currents and speeds, EFD0 and Pm0 (until exciters and governors set them)."""
     vt = v[:model.n_gen]
     current = (emf - vt) / model.z_source
     # (n_gen,) rotor-frame currents, concatenated on purpose: the concatenation is stored,
@@ -91,30 +87,40 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
     dw = machine_state(x, "dw")
     xadifd = jnp.concatenate([g.model.field_current(g.params, xs, i_dq[_index(g)])
                               for g, xs in zip(model.machines, x.machines)])
-    efd = jnp.asarray(model.efd0)
-    d_exciters = []
-    for g, xs in zip(model.exciters, x.exciters):
-        k = _index(g)
-        inputs = ExciterInputs(ec=jnp.abs(vt[k]), vt=vt[k], it=current[k], xadifd=xadifd[k],
-                               dw=dw[k])
-        out, dx = g.model.dynamics(g.params, xs, inputs)
-        efd = efd.at[k].set(out)
-        d_exciters.append(dx)
-    pm = jnp.asarray(model.pm0)
-    d_governors = []
-    for g, xs in zip(model.governors, x.governors):
-        k = _index(g)
-        out, dx = g.model.dynamics(g.params, xs, dw[k])
-        pm = pm.at[k].set(out)
-        d_governors.append(dx)
-    d_machines = tuple(
-        g.model.derivative(g.params, xs, i_dq[_index(g)], efd[_index(g)], pm[_index(g)],
-                           model.omega_b)
-        for g, xs in zip(model.machines, x.machines))
-    v_load = v[model.n_gen:]
-    d_loads = tuple(g.model.derivative(g.params, xs, zs, v_load[_index(g)])
-                    for g, xs, zs in zip(model.loads, x.loads, x.load_flags))
-    return (d_machines, tuple(d_exciters), tuple(d_governors), d_loads), v, residual
+    return Signals(vt=vt, current=current, i_dq=i_dq, xadifd=xadifd, dw=dw,
+                   efd=jnp.asarray(model.efd0), pm=jnp.asarray(model.pm0),
+                   v_load=v[model.n_gen:], omega_b=model.omega_b)
+
+
+def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
+    """Time derivatives of every integrated state.
+
+    One loop over the families in `CAUSAL_ORDER`: each group reads its ports from the
+    signals (`DeviceModel.ports`), and its output (EFD, Pm) is written back before the
+    next family reads them.
+
+    Args:
+      x: current state; fault/active: the task's fault and whether it is on (0/1).
+    Returns:
+      (dx, v, residual): dx a tuple (machines, exciters, governors, loads) of {state: rate}
+      dicts mirroring x.integrated(); v (n_slot,) the slot voltages; residual the network
+      fixed-point residual.
+    """
+    v, _, residual, emf = solve_network(model, x, fault, active)
+    signals = machine_signals(model, x, v, emf)
+    rates = {}
+    for family in CAUSAL_ORDER:
+        groups = getattr(model, family)
+        flags = x.load_flags if family == "loads" else ({},) * len(groups)
+        rates[family] = []
+        for g, xs, zs in zip(groups, getattr(x, family), flags):
+            k = _index(g)
+            out, dx = g.model.rates(g.params, xs, g.model.ports(signals, k, zs))
+            if g.model.output is not None:
+                driven = getattr(signals, g.model.output).at[k].set(out)
+                signals = signals._replace(**{g.model.output: driven})
+            rates[family].append(dx)
+    return tuple(tuple(rates[family]) for family in FAMILIES), v, residual
 
 
 def update_loads(model: GridModel, x: GridState, v_old, dt: float) -> GridState:
@@ -130,8 +136,8 @@ def update_loads(model: GridModel, x: GridState, v_old, dt: float) -> GridState:
 
 
 def clip_to_limits(model: GridModel, states):
-    """Clip non-windup states to their limits after an update (cannot overshoot by a step)."""
-    machines, exciters, governors, loads = states
+    """Clip non-windup states to their limits after an update (cannot overshoot by a step);
+    states mirrors x.integrated()."""
 
     def clip(groups, values):
         out = []
@@ -142,8 +148,8 @@ def clip_to_limits(model: GridModel, states):
             out.append(xs)
         return tuple(out)
 
-    return (machines, clip(model.exciters, exciters), clip(model.governors, governors),
-            clip(model.loads, loads))
+    return tuple(clip(getattr(model, family), values)
+                 for family, values in zip(FAMILIES, states))
 
 
 def axpy(a, dx, x):

@@ -60,7 +60,8 @@ from jaxgrid.io import pnnl
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.models.acmotor import MotorOptions
-from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, internal_buses
+from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions
+from jaxgrid.models.cmld_init import internal_buses
 from jaxgrid.models.loads import LoadSplit
 from jaxgrid.powerflow import bus_loads
 from jaxgrid.simulate import Bounds

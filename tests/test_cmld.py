@@ -34,10 +34,10 @@ from jaxgrid.dynamics import derivatives, load_injection, solve_network, update_
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import RawWarning, read_raw
 from jaxgrid.models.acmotor import Acmtblu1, MotorOptions
-from jaxgrid.models.base import LoadSite, ModelError
+from jaxgrid.models.base import LoadPorts, LoadSite, ModelError
 from jaxgrid.models.cmld import (Cmldblu2, CompositeOptions, CompositeWarning,
-                                 _electronic_fraction, expand, initialise, internal_buses,
-                                 read_records)
+                                 _electronic_fraction)
+from jaxgrid.models.cmld_init import expand, initialise, internal_buses, read_records
 from jaxgrid.powerflow import solve
 from jaxgrid.models.induction import Cim5bl
 
@@ -209,9 +209,9 @@ def heun(model, p, x, z, volts, dt=DT):
     out, v_old = [], volts[0]
     for v in volts:
         v1 = jnp.asarray([v])
-        k1 = model.derivative(p, x, z, v1)
+        _, k1 = model.rates(p, x, LoadPorts(v1, z))
         x1 = {k: x[k] + dt * k1[k] for k in x}
-        k2 = model.derivative(p, x1, z, v1)
+        _, k2 = model.rates(p, x1, LoadPorts(v1, z))
         x = {k: x[k] + 0.5 * dt * (k1[k] + k2[k]) for k in x}
         z = model.update(p, x, z, v1, jnp.asarray([v_old]), dt)
         out.append(complex(model.current(p, x, z, v1)[0]))

@@ -16,8 +16,8 @@ import pytest
 
 from conftest import SHARED_CASES, andes_cases_dir
 from jaxgrid.io.dyr import DyrRecord, read_dyr
-from jaxgrid.models.base import ExciterInputs, ModelError
-from jaxgrid.models.exciters import EXCITERS
+from jaxgrid.models.base import ModelError
+from jaxgrid.models.exciters import EXCITERS, ExciterPorts
 
 # init and dynamics evaluate the same float64 expressions; what remains is round-off on
 # derivatives of order KA·u/TA ~ 1e3 p.u./s.
@@ -70,10 +70,10 @@ def real_records(name: str, tmp_path: Path) -> tuple[DyrRecord, ...]:
     return tuple(hand(name, cons) for cons in HAND[name])
 
 
-def inputs(ec, xadifd) -> ExciterInputs:
+def inputs(ec, xadifd) -> ExciterPorts:
     ec = jnp.asarray(ec, dtype=jnp.float64)
-    return ExciterInputs(ec=ec, vt=ec * jnp.exp(0.3j), it=jnp.full(ec.shape, 0.8 - 0.2j),
-                         xadifd=jnp.asarray(xadifd, dtype=jnp.float64), dw=jnp.zeros_like(ec))
+    return ExciterPorts(ec=ec, vt=ec * jnp.exp(0.3j), it=jnp.full(ec.shape, 0.8 - 0.2j),
+                        xadifd=jnp.asarray(xadifd, dtype=jnp.float64), dw=jnp.zeros_like(ec))
 
 
 def start(model, records, efd0, ec0=1.0):
@@ -92,7 +92,7 @@ def simulate(model, p, x, inp, dt: float, n_steps: int):
     limits = model.limits(p)
 
     def step(x, _):
-        efd, dx = model.dynamics(p, x, inp)
+        efd, dx = model.rates(p, x, inp)
         x = {k: x[k] + dt * dx[k] for k in x}
         x = {k: jnp.clip(v, *limits[k]) if k in limits else v for k, v in x.items()}
         return x, (efd, x)
@@ -121,9 +121,9 @@ def test_equilibrium(name, tmp_path):
         assert not any(violations.values()), f"{name}: limits violated at t = 0: {violations}"
 
         def total_rate(ec):
-            return sum(jnp.sum(d) for d in model.dynamics(p, x, inp._replace(ec=ec))[1].values())
+            return sum(jnp.sum(d) for d in model.rates(p, x, inp._replace(ec=ec))[1].values())
 
-        (efd, dx), grad = jax.jit(lambda ec: (model.dynamics(p, x, inp._replace(ec=ec)),
+        (efd, dx), grad = jax.jit(lambda ec: (model.rates(p, x, inp._replace(ec=ec)),
                                               jax.grad(total_rate)(ec)))(inp.ec)
         assert set(dx) == set(model.states), f"{name}: derivative keys {sorted(dx)}"
         for state, d in dx.items():
@@ -158,7 +158,7 @@ def test_ieeet1_regulator_stops_at_vrmax():
         np.testing.assert_allclose(vr[:hit], free[:hit], rtol=0, atol=DISCRETE_TOL,
                                    err_msg="VR before the limit: lag with time constant TA")
         assert np.all(vr[hit:] == 5.0), f"VR after the limit: {vr[hit:hit + 5]} ..."
-        _, dx = model.dynamics(p, {k: v[-1] for k, v in traj.items()}, stepped)
+        _, dx = model.rates(p, {k: v[-1] for k, v in traj.items()}, stepped)
         assert float(dx["vr"][0]) == 0.0, f"dVR/dt = {dx['vr']} at VRMAX (must be frozen)"
 
 
@@ -171,7 +171,7 @@ def test_sexs_steady_state_gain():
     with jax.enable_x64(True):
         p, x, inp = start(model, records, 2.0)
         stepped = inp._replace(ec=inp.ec - 0.01)
-        efd, _ = model.dynamics(p, x, stepped)
+        efd, _ = model.rates(p, x, stepped)
         assert abs(float(efd[1]) - 2.1) < DISCRETE_TOL, f"EFD right after the step: {efd}"
         efd, _ = simulate(model, p, x, stepped, 1e-3, 25_000)
         final = np.asarray(efd[-1])
@@ -192,7 +192,7 @@ def test_exdc2_ceiling_scales_with_ec():
             stepped = inp._replace(ec=inp.ec * 0.8)
             _, traj = simulate(model, p, x, stepped, 1e-3, 200)
             last = {k: v[-1] for k, v in traj.items()}
-            _, dx = model.dynamics(p, last, stepped)
+            _, dx = model.rates(p, last, stepped)
             ceilings[name] = float(0.5 * dx["efd"][0] + last["efd"][0])
     assert abs(ceilings["IEEEX1"] - 3.0) < DISCRETE_TOL, f"IEEEX1 ceiling {ceilings}"
     assert abs(ceilings["EXDC2"] - 2.4) < DISCRETE_TOL, f"EXDC2 ceiling {ceilings}"
@@ -243,7 +243,7 @@ def test_exst1_output_ceiling():
     with jax.enable_x64(True):
         p, x, _ = start(model, records, 2.0)
         x = dict(x, vr=jnp.array([10.0, -10.0]))
-        efd, _ = model.dynamics(p, x, inputs([0.9, 0.9], [2.0, 2.0]))
+        efd, _ = model.rates(p, x, inputs([0.9, 0.9], [2.0, 2.0]))
     np.testing.assert_allclose(np.asarray(efd), [4.1, -3.6], rtol=0, atol=DISCRETE_TOL,
                                err_msg="EXST1 output limits")
 

@@ -22,7 +22,8 @@ import pytest
 from conftest import SHARED_CASES, andes_cases_dir
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.models.base import ModelError
-from jaxgrid.models.governors import GOVERNORS, Gast, Hygov, Ieeeg1, Ieesgo, Tgov1
+from jaxgrid.models.governors import (GOVERNORS, Gast, GovernorPorts, Hygov, Ieeeg1, Ieesgo,
+                                      Tgov1)
 
 IEEE39_DYR = SHARED_CASES / "ieee39" / "IEEE39bus_3AC.dyr"
 ACTIVSG_DYR = SHARED_CASES / "activsg2000" / "ACTIVSg2000_dyn_acmotor_zone3_v1.dyr"
@@ -74,7 +75,7 @@ def simulate(model, p, x, dw, t_end: float, dt: float):
     @jax.jit
     def run(p, x, dw):
         def step(_, x):
-            _, dx = model.dynamics(p, x, dw)
+            _, dx = model.rates(p, x, GovernorPorts(dw))
             x = {k: v + dt * dx[k] for k, v in x.items()}
             return {k: jnp.clip(v, *limits[k]) if k in limits else v for k, v in x.items()}
         return jax.lax.fori_loop(0, round(t_end / dt), step, x)
@@ -105,7 +106,7 @@ def test_init_is_steady(records, name, source, bypass):
     assert set(x) == set(model.states), f"{name}: init states {sorted(x)} != {model.states}"
     bad = {k: np.flatnonzero(v) for k, v in model.init_violations(p, x).items() if np.any(v)}
     assert not bad, f"{name} ({source}): init outside limits {bad}"
-    pm, dx = model.dynamics(p, x, jnp.zeros(n))
+    pm, dx = model.rates(p, x, GovernorPorts(jnp.zeros(n)))
     for state, d in dx.items():
         assert float(jnp.max(jnp.abs(d))) < STEADY_TOL, f"{name} ({source}) d{state}/dt = {d}"
     assert float(jnp.max(jnp.abs(pm - pm0))) < STEADY_TOL, f"{name} ({source}): Pm {pm} != {pm0}"
@@ -116,7 +117,7 @@ def test_dynamics_jit_and_gradient(records, name, source):
     model = GOVERNORS[name]
     p = with_bypassed_half(model, params(model, records[source][name]))
     p, x = model.init(p, jnp.full(len(p[model.cons[0].name]), 0.7))
-    total_pm = jax.jit(lambda p, x, dw: jnp.sum(model.dynamics(p, x, dw)[0]))
+    total_pm = jax.jit(lambda p, x, dw: jnp.sum(model.rates(p, x, GovernorPorts(dw))[0]))
     dw = jnp.full(x[model.states[0]].shape, -0.002)
     grads = jax.grad(total_pm, argnums=(0, 1, 2))(p, x, dw)
     for leaf in jax.tree_util.tree_leaves(grads):
@@ -160,7 +161,7 @@ def test_tgov1_droop_settles(records):
     pm0, dw = 0.7, 0.001
     p, x = Tgov1.init(p, jnp.full(4, pm0))
     x = simulate(Tgov1, p, x, dw, t_end=200.0, dt=0.01)  # 28 T3: transient < 1e-12
-    pm, _ = Tgov1.dynamics(p, x, jnp.full(4, dw))
+    pm, _ = Tgov1.rates(p, x, GovernorPorts(jnp.full(4, dw)))
     expected = pm0 - dw / 0.05 - 0.5 * dw
     assert np.allclose(pm, expected, rtol=0, atol=SETTLED_TOL), (pm, expected)
 
@@ -172,9 +173,9 @@ def test_tgov1_vmax_is_non_windup(records):
     p, x = Tgov1.init(p, jnp.array([0.7]))
     x = simulate(Tgov1, p, x, -0.05, t_end=5.0, dt=0.01)
     assert float(x["x1"][0]) == 0.9, x["x1"]
-    _, dx = Tgov1.dynamics(p, x, jnp.array([-0.05]))
+    _, dx = Tgov1.rates(p, x, GovernorPorts(jnp.array([-0.05])))
     assert float(dx["x1"][0]) == 0.0, "derivative not frozen at VMAX"
-    _, dx = Tgov1.dynamics(p, x, jnp.array([0.0]))
+    _, dx = Tgov1.rates(p, x, GovernorPorts(jnp.array([0.0])))
     assert float(dx["x1"][0]) == pytest.approx((0.7 - 0.9) / 0.49), dx["x1"]
 
 
@@ -184,9 +185,9 @@ def test_ieeeg1_valve_rate_limits(records):
     # clipped while the gap exceeds Uo·T3 = 0.01 (opening) or |Uc|·T3 = 0.05 (closing).
     p = params(Ieeeg1, records["ieee39"]["IEEEG1"][:1])
     p, x0 = Ieeeg1.init(p, jnp.array([0.5]))
-    _, dx = Ieeeg1.dynamics(p, x0, jnp.array([-0.01]))
+    _, dx = Ieeeg1.rates(p, x0, GovernorPorts(jnp.array([-0.01])))
     assert float(dx["pgv"][0]) == 0.1, "opening rate is not Uo"
-    _, dx = Ieeeg1.dynamics(p, x0, jnp.array([0.01]))
+    _, dx = Ieeeg1.rates(p, x0, GovernorPorts(jnp.array([0.01])))
     assert float(dx["pgv"][0]) == -0.5, "closing rate is not Uc"
     # Opening: the gap 0.2 shrinks at Uo for 1.9 s, so after 1 s Pgv = 0.5 + Uo·1 exactly.
     x = simulate(Ieeeg1, p, x0, -0.01, t_end=1.0, dt=0.001)
@@ -194,7 +195,7 @@ def test_ieeeg1_valve_rate_limits(records):
     # Closing towards P0 − 0.2 = 0.3 < PMIN: stops exactly at PMIN = 0.4 (after 0.2 s at Uc).
     x = simulate(Ieeeg1, p, x0, 0.01, t_end=1.0, dt=0.001)
     assert float(x["pgv"][0]) == 0.4, x["pgv"]
-    _, dx = Ieeeg1.dynamics(p, x, jnp.array([0.01]))
+    _, dx = Ieeeg1.rates(p, x, GovernorPorts(jnp.array([0.01])))
     assert float(dx["pgv"][0]) == 0.0, "valve derivative not frozen at PMIN"
 
 
@@ -203,7 +204,7 @@ def test_ieeeg1_bypassed_turbine_follows_valve(records):
     p = params(Ieeeg1, records["ieee39"]["IEEEG1"][:1], t4=0, t5=0, t6=0, t7=0)
     p, x = Ieeeg1.init(p, jnp.array([0.6]))
     x = dict(x, pgv=jnp.array([0.65]))
-    pm, dx = Ieeeg1.dynamics(p, x, jnp.array([0.0]))
+    pm, dx = Ieeeg1.rates(p, x, GovernorPorts(jnp.array([0.0])))
     assert float(pm[0]) == pytest.approx(0.65, abs=1e-15)
     assert all(float(dx[s][0]) == 0.0 for s in ("y4", "y5", "y6", "y7")), dx
 
@@ -214,14 +215,14 @@ def test_ieesgo_static_gain_and_lead(records):
     p = params(Ieesgo, records["ieee39"]["IEESGO"])
     p, x = Ieesgo.init(p, jnp.full(2, 0.8))
     x = simulate(Ieesgo, p, x, 0.001, t_end=60.0, dt=0.002)  # slowest T5 = 3 s
-    pm, _ = Ieesgo.dynamics(p, x, jnp.full(2, 0.001))
+    pm, _ = Ieesgo.rates(p, x, GovernorPorts(jnp.full(2, 0.001)))
     assert np.allclose(pm, 0.8 - 14.3 * 0.001, rtol=0, atol=SETTLED_TOL), pm
     # T1 = 0 with T2 = 1, T3 = 0.5 and no turbine lags: the lead pairs with T3, so a speed
     # step gives K1·(T2/T3)·Δω at once; with T1 = T3 = 0 the filter is the static gain K1.
     p = params(Ieesgo, records["ieee39"]["IEESGO"], t1=0, t2=1.0, t3=[0.5, 0.0],
                t4=0, t5=0, t6=0)
     p, x = Ieesgo.init(p, jnp.full(2, 0.8))
-    pm, _ = Ieesgo.dynamics(p, x, jnp.full(2, 0.001))
+    pm, _ = Ieesgo.rates(p, x, GovernorPorts(jnp.full(2, 0.001)))
     assert np.allclose(pm, [0.8 - 14.3 * 2 * 0.001, 0.8 - 14.3 * 0.001], rtol=0, atol=1e-14), pm
 
 
@@ -231,7 +232,7 @@ def test_gast_load_limit(records):
     p = params(Gast, records["ieee39"]["GAST"], vmax=1.2)
     p, x = Gast.init(p, jnp.array([0.8]))
     x = simulate(Gast, p, x, -0.01, t_end=60.0, dt=0.002)
-    pm, _ = Gast.dynamics(p, x, jnp.array([-0.01]))
+    pm, _ = Gast.rates(p, x, GovernorPorts(jnp.array([-0.01])))
     assert float(pm[0]) == pytest.approx(0.9, abs=SETTLED_TOL)
 
 
@@ -243,7 +244,7 @@ def test_hygov_droop_settles(records):
     pm0, dw = 0.6, 0.0005
     p, x = Hygov.init(p, jnp.full(3, pm0))
     x = simulate(Hygov, p, x, dw, t_end=2000.0, dt=0.01)  # slowest mode r·Tr/R ≈ 74 s
-    pm, _ = Hygov.dynamics(p, x, jnp.full(3, dw))
+    pm, _ = Hygov.rates(p, x, GovernorPorts(jnp.full(3, dw)))
     g = p["nref"] / p["r"] - dw / p["r"]
     expected = pm0 - p["at"] * dw / p["r"] - 0.5 * dw * g
     assert np.allclose(x["g"], g, rtol=0, atol=SETTLED_TOL), (x["g"], g)
@@ -255,14 +256,14 @@ def test_hygov_velm_and_gate_limits(records):
     # and not at all once at GMAX.
     p = params(Hygov, records["activsg"]["HYGOV"][:1])
     p, x = Hygov.init(p, jnp.array([0.5]))
-    _, dx = Hygov.dynamics(p, dict(x, x1=jnp.array([1.0])), jnp.array([0.0]))
+    _, dx = Hygov.rates(p, dict(x, x1=jnp.array([1.0])), GovernorPorts(jnp.array([0.0])))
     assert float(dx["xi"][0]) == float(p["velm"][0]), dx["xi"]
-    _, dx = Hygov.dynamics(p, dict(x, x1=jnp.array([-1.0])), jnp.array([0.0]))
+    _, dx = Hygov.rates(p, dict(x, x1=jnp.array([-1.0])), GovernorPorts(jnp.array([0.0])))
     assert float(dx["xi"][0]) == -float(p["velm"][0]), dx["xi"]
     at_max = dict(x, x1=jnp.array([1.0]), xi=p["gmax"])
-    _, dx = Hygov.dynamics(p, at_max, jnp.array([0.0]))
+    _, dx = Hygov.rates(p, at_max, GovernorPorts(jnp.array([0.0])))
     assert float(dx["xi"][0]) == 0.0, "integrator not frozen at GMAX"
-    pm, dx = Hygov.dynamics(p, dict(x, g=jnp.array([0.0])), jnp.array([0.0]))
+    pm, dx = Hygov.rates(p, dict(x, g=jnp.array([0.0])), GovernorPorts(jnp.array([0.0])))
     assert bool(jnp.isfinite(pm[0]) & jnp.isfinite(dx["q"][0])), "closed gate gives inf/nan"
 
 

@@ -5,7 +5,7 @@
 3. Bad data raise a ModelError naming file:line (CONs, ICON, and "cannot carry its load").
 4. Under-voltage trip timing and latching (§7); a tripped motor draws nothing and is frozen.
 5. Against ANDES (CURENT, PyPI `andes`): single cage vs Motor3, double cage vs Motor5, on a
-   stiff bus whose voltage dips 1.0 -> 0.7 -> 1.0 p.u. Our side integrates `derivative` with
+   stiff bus whose voltage dips 1.0 -> 0.7 -> 1.0 p.u. Our side integrates `rates` with
    RK4 on ANDES's own time grid under ANDES's bus voltage. The differences are ANDES's
    trapezoid error (they fall 4x when its step halves).
 6. An independent check: the speed after a voltage step settles at the torque balance of the
@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from jaxgrid.io.dyr import read_dyr
-from jaxgrid.models.base import LoadSite, ModelError, device_label
+from jaxgrid.models.base import LoadPorts, LoadSite, ModelError, device_label
 from jaxgrid.models.induction import (INDUCTION_MOTORS, Cim5bl, Cim6bl, circuit_impedance,
                                       motor_constants, steady_impedance)
 
@@ -106,7 +106,7 @@ def test_closed_form_steady_state_is_the_circuit(tmp_path, cons):
 
 @pytest.mark.parametrize("cons", [SINGLE, DOUBLE], ids=["single", "double"])
 def test_derivative_at_rest_reproduces_circuit_impedance(tmp_path, cons):
-    """At fixed speed, the states where `derivative` vanishes give V/I = Z(s) of the circuit."""
+    """At fixed speed, the states where `rates` vanishes give V/I = Z(s) of the circuit."""
     recs = records(tmp_path, [f"CIM5BL {cons} {CIM5_TAIL}"])
     p, x, z, *_ = initialised(Cim5bl, recs, KEEP_ALL)
     v = jnp.asarray([1.0 + 0j])
@@ -114,7 +114,7 @@ def test_derivative_at_rest_reproduces_circuit_impedance(tmp_path, cons):
 
     @jax.jit
     def rates(y, w):
-        dx = Cim5bl.derivative(p, dict(zip(names, y[:, None]), w=w), z, v)
+        dx = Cim5bl.rates(p, dict(zip(names, y[:, None]), w=w), LoadPorts(v, z))[1]
         return jnp.stack([dx[k][0] for k in names])
 
     for s in SLIPS:
@@ -126,7 +126,7 @@ def test_derivative_at_rest_reproduces_circuit_impedance(tmp_path, cons):
         y[keep] = np.linalg.solve(np.asarray(jac)[np.ix_(keep, keep)],
                                   -np.asarray(rates(y0, w))[keep])
         xs = dict(zip(names, jnp.asarray(y)[:, None]), w=w)
-        dx = Cim5bl.derivative(p, xs, z, v)
+        _, dx = Cim5bl.rates(p, xs, LoadPorts(v, z))
         assert max_rate({k: dx[k] for k in names}) < STEADY_TOL  # ω held: its rate is not 0
         i_motor = Cim5bl.current(p, xs, z, v) / p["sm"]
         z_model = complex(v[0] / i_motor[0])
@@ -156,7 +156,7 @@ def test_init_is_at_rest_and_draws_the_record(tmp_path, case):
     recs = records(tmp_path, [f"{name} {cons} {tail}"])
     p, x, z, s0, notes, where = initialised(model, recs, options)
     v = jnp.asarray(where.v0)
-    assert max_rate(model.derivative(p, x, z, v)) < STEADY_TOL, case
+    assert max_rate(model.rates(p, x, LoadPorts(v, z))[1]) < STEADY_TOL, case
     drawn = np.asarray(v * jnp.conj(model.current(p, x, z, v)))
     np.testing.assert_allclose(drawn, s0, atol=POWER_TOL, err_msg=case)
     np.testing.assert_allclose(s0.real, where.record_p, atol=POWER_TOL, err_msg=case)
@@ -293,7 +293,7 @@ def test_tripped_motor_draws_nothing_and_is_frozen(tmp_path):
     z = dict(z, status=jnp.zeros(1))
     v = jnp.asarray([0.4 + 0.1j])
     assert float(jnp.abs(Cim5bl.current(p, x, z, v))[0]) == 0.0
-    assert max_rate(Cim5bl.derivative(p, x, z, v)) == 0.0
+    assert max_rate(Cim5bl.rates(p, x, LoadPorts(v, z))[1]) == 0.0
 
 
 # --------------------------------------------------------------------------- #
@@ -395,7 +395,7 @@ def follow(model, p, x, z, t, v):
     """
     def rk4(x, step):
         h, vk = step
-        f = lambda y: model.derivative(p, y, z, vk)  # noqa: E731
+        f = lambda y: model.rates(p, y, LoadPorts(vk, z))[1]  # noqa: E731
         k1 = f(x)
         k2 = f({k: x[k] + 0.5 * h * k1[k] for k in x})
         k3 = f({k: x[k] + 0.5 * h * k2[k] for k in x})
@@ -505,12 +505,13 @@ def test_jit_vmap_and_float32(tmp_path):
     f32 = lambda d: {k: v.astype(jnp.complex64 if jnp.iscomplexobj(v) else jnp.float32)  # noqa
                      for k, v in d.items()}
     p32, x32, z32 = f32(p), f32(x), f32(z)
-    rates = jax.jit(Cim6bl.derivative)
+    rates = jax.jit(lambda p, x, z, v: Cim6bl.rates(p, x, LoadPorts(v, z))[1])
     assert max_rate(rates(p32, x32, z32, v0.astype(jnp.complex64))) < FLOAT32_TOL
     assert rates(p32, x32, z32, v0.astype(jnp.complex64))["w"].dtype == jnp.float32
     scales = jnp.asarray([1.0, 0.8, 0.5])  # a batch of voltages
-    batched = jax.vmap(lambda a: Cim6bl.derivative(p32, x32, z32, a * v0.astype(jnp.complex64)))
-    one = {k: np.asarray(v) for k, v in Cim6bl.derivative(p, x, z, 0.5 * v0).items()}
+    batched = jax.vmap(lambda a: Cim6bl.rates(p32, x32, LoadPorts(a * v0.astype(jnp.complex64),
+                                                                z32))[1])
+    one = {k: np.asarray(v) for k, v in Cim6bl.rates(p, x, LoadPorts(0.5 * v0, z))[1].items()}
     for k, v in batched(scales).items():
         np.testing.assert_allclose(np.asarray(v[2]), one[k], rtol=1e-4, atol=1e-3, err_msg=k)
     cur = jax.jit(Cim6bl.current)(p32, x32, z32, v0.astype(jnp.complex64))

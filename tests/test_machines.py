@@ -10,7 +10,7 @@ import pytest
 
 from jaxgrid.io.dyr import DyrRecord, read_dyr
 from jaxgrid.models.base import ModelError, quadratic_saturation, quadratic_saturation_constants
-from jaxgrid.models.machines import MACHINES
+from jaxgrid.models.machines import MACHINES, MachinePorts
 from tests.conftest import SHARED_CASES, andes_cases_dir
 
 V0 = 1.02 * np.exp(0.2j)   # terminal voltage, p.u.
@@ -67,7 +67,7 @@ def test_machine_starts_at_rest(name, machine_records):
         # Pm0 = P + Ra·|I|² (air-gap power)
         expected = np.real(V0 * np.conj(I0)) + 0.002 * abs(I0) ** 2
         np.testing.assert_allclose(np.asarray(pm0), expected, atol=1e-12)
-        dx = model.derivative(p, x, model.to_rotor(x, i0), efd0, pm0, OMEGA_B)
+        _, dx = model.rates(p, x, MachinePorts(model.to_rotor(x, i0), efd0, pm0, OMEGA_B))
         for state, rate in dx.items():
             assert np.abs(np.asarray(rate)).max() < 1e-10, f"{name}: d{state}/dt != 0 at t = 0"
 

@@ -1,10 +1,17 @@
-"""What every dynamic device model shares: its CON table, validation and limiter blocks.
+"""What every dynamic device model shares: its CON table, validation, ports and limiter blocks.
 
 A model is a class with class-level structure (PSS/E name, CON order with units and
 allowed ranges, state names) and pure functions over parameter and state dicts whose
 arrays have one row per unit, so one family's equations are one vectorised expression
 whatever the number of units. Limiter conventions follow IEEE 421.5 as summarised in
 `shared/specs/machines-exciters-governors.md` §0.
+
+Every family declares its ports once, as PowerSimulationsDynamics.jl does
+(`src/base/ports.jl`): `ports(signals, k, flags)` picks what its units read from the
+model-wide `Signals` of one evaluation, `rates(p, x, ports) -> (output, dx)` gives the
+state derivatives and the signal it drives (`output` names the `Signals` field: EFD for
+exciters, Pm for governors; None for machines and loads). `jaxgrid.dynamics.derivatives`
+runs the families in causal order, each reading the signals the earlier ones wrote.
 """
 from __future__ import annotations
 
@@ -20,6 +27,7 @@ import numpy as np
 from jaxgrid.io.dyr import DyrRecord
 
 INF = math.inf
+LIMIT_TOL = 1e-6  # p.u.: initial values computed in float64 sit on a limit to round-off
 TIMER_TOL_STEPS = 0.01  # of a step: see timer_fires
 
 Array = jnp.ndarray
@@ -61,17 +69,69 @@ def device_label(record: DyrRecord) -> str:
     return f"{record.source}:{record.line}: {record.model} at bus {record.bus} id '{record.device_id}'"
 
 
+class Signals(NamedTuple):
+    """The interface signals of one evaluation of the grid, model-wide.
+
+    Attributes:
+      vt: (n_gen,) machine terminal voltages, network frame, complex p.u.
+      current: (n_gen,) machine currents injected into the bus, network frame, complex
+        p.u. on MBASE.
+      i_dq: (n_gen,) the same currents in each machine's rotor frame, id + j·iq.
+      xadifd: (n_gen,) field currents XadIfd, p.u.
+      dw: (n_gen,) speed deviations, p.u.
+      efd: (n_gen,) field voltages, p.u. (EFD0 where no exciter drives them).
+      pm: (n_gen,) mechanical powers, p.u. MBASE (Pm0 where no governor drives them).
+      v_load: (n_load,) load-slot voltages, network frame, complex p.u.
+      omega_b: base angular frequency, rad/s (Python float).
+    """
+
+    vt: Array
+    current: Array
+    i_dq: Array
+    xadifd: Array
+    dw: Array
+    efd: Array
+    pm: Array
+    v_load: Array
+    omega_b: float
+
+
+def outside_limits(x: Array, lo: Array, hi: Array) -> Array:
+    """True where x lies outside [lo − LIMIT_TOL, hi + LIMIT_TOL] (NaN counts as outside):
+    the one rule for an initial value outside its limits."""
+    return ~((x >= lo - LIMIT_TOL) & (x <= hi + LIMIT_TOL))
+
+
 class DeviceModel:
-    """Structure shared by machine, exciter and governor models.
+    """Structure and contract shared by every device family.
 
     Subclasses set `name`, `cons` (PSS/E CON order), `states` and `n_icons` (integer
-    values written before the CONs, e.g. IEEEG1's JBUS and M).
+    values written before the CONs, e.g. IEEEG1's JBUS and M). A family sets `output` (the
+    `Signals` field its rates drive, or None) and implements `ports` and `rates`.
     """
 
     name: ClassVar[str]
     cons: ClassVar[tuple[Con, ...]]
     states: ClassVar[tuple[str, ...]]
     n_icons: ClassVar[int] = 0
+    output: ClassVar[str | None] = None
+
+    @classmethod
+    def ports(cls, signals: Signals, k: Array, flags: States) -> NamedTuple:
+        """What the units at machine or load-slot indices k (n,) read from `signals`;
+        flags: their discrete states (empty outside load models)."""
+        raise NotImplementedError
+
+    @classmethod
+    def rates(cls, p: Params, x: States, ports: NamedTuple) -> tuple[Array | None, States]:
+        """(output (n,) or None, {state: d/dt per second}) at the given ports."""
+        raise NotImplementedError
+
+    @classmethod
+    def prepare(cls, p: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """CON arrays with the derived constants the model needs added (NumPy, compile
+        time); none by default."""
+        return p
 
     @classmethod
     def read(cls, records: Sequence[DyrRecord]) -> dict[str, np.ndarray]:
@@ -118,9 +178,9 @@ class DeviceModel:
 
     @classmethod
     def init_violations(cls, p: Params, x: States) -> dict[str, Array]:
-        """Per variable, (n,) bool of units whose initial value lies outside its limits."""
-        tol = 1e-6  # initial values computed in float64 sit on a limit to round-off
-        return {name: (x[name] < lo - tol) | (x[name] > hi + tol)
+        """Per variable, (n,) bool of units whose initial value lies outside its limits
+        (`outside_limits`)."""
+        return {name: outside_limits(x[name], lo, hi)
                 for name, (lo, hi) in cls.limits(p).items()}
 
 
@@ -209,22 +269,16 @@ def saturation_problem(x1: float, s1: float, x2: float, s2: float) -> str | None
     return None
 
 
-class ExciterInputs(NamedTuple):
-    """Signals an exciter reads from its machine, arrays (n_exc,).
+class LoadPorts(NamedTuple):
+    """What a load model reads, arrays (n,).
 
     Attributes:
-      ec: terminal voltage magnitude, p.u.
-      vt: terminal voltage phasor, network frame, complex p.u.
-      it: machine current injected into the bus, network frame, complex p.u. on MBASE.
-      xadifd: field current XadIfd, p.u.
-      dw: speed deviation, p.u.
+      v: bus (load-slot) voltage, network frame, complex p.u.
+      flags: the units' discrete states {flag: (n,)} (`LoadModel.flags`).
     """
 
-    ec: Array
-    vt: Array
-    it: Array
-    xadifd: Array
-    dw: Array
+    v: Array
+    flags: States
 
 
 class LoadSite(NamedTuple):
@@ -264,6 +318,10 @@ class LoadModel(DeviceModel):
     flags: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
+    def ports(cls, signals: Signals, k: Array, flags: States) -> LoadPorts:
+        return LoadPorts(v=signals.v_load[k], flags=flags)
+
+    @classmethod
     def init(cls, p: Params, site: LoadSite, options) -> tuple[Params, States, States, Array, list]:
         """(p with y_norton and derived constants, states, flags, s0, notes) at the power flow.
 
@@ -292,9 +350,9 @@ class LoadModel(DeviceModel):
         return None
 
     @classmethod
-    def derivative(cls, p: Params, x: States, z: States, v: Array) -> States:
-        """Rates of the continuous states at bus voltage v (n,) complex."""
-        return {}
+    def rates(cls, p: Params, x: States, ports: LoadPorts) -> tuple[None, States]:
+        """(None, rates of the continuous states) at bus voltage ports.v (n,) complex."""
+        return None, {}
 
     @classmethod
     def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:

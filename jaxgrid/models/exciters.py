@@ -3,7 +3,7 @@
 Equations, CON orders and initialisation follow `shared/specs/machines-exciters-governors.md`
 §0 and §4-§8 (PSS/E data layouts, IEEE 421.5 block diagrams); EXST1 follows the PSS/E / IEEE
 ST1A structure described in its class. Voltages are per unit on the machine base, time
-constants in seconds. Every model reads the signals of `ExciterInputs` and returns the field
+constants in seconds. Every model reads the signals of `ExciterPorts` and returns the field
 voltage EFD (p.u.). There are no stabilizer models, so the PSS input Vs is 0 throughout.
 
 Zero time constants bypass their block where the structure allows it (TR, TB/TC, TA, SEXS's TE):
@@ -14,14 +14,14 @@ when the data are read.
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import jax.numpy as jnp
-import numpy as np
 
-from jaxgrid.models.base import (Array, Con, DeviceModel, ExciterInputs, Params, States,
-                                 freeze_at_limits, lag, lead_lag_output, quadratic_saturation,
-                                 quadratic_saturation_constants, safe, saturation_problem)
+from jaxgrid.models.base import (Array, Con, DeviceModel, Params, Signals, States,
+                                 freeze_at_limits, lag, lead_lag_output, outside_limits,
+                                 quadratic_saturation, quadratic_saturation_constants, safe,
+                                 saturation_problem)
 
 _TR = Con("tr", "s", "voltage transducer time constant (0: bypassed)", 0.0)
 _KA = Con("ka", "p.u.", "regulator gain", 0.0, positive=True)
@@ -66,33 +66,44 @@ def _feedback_problem(model: type[DeviceModel], p: dict[str, float], tf: str) ->
     return None
 
 
-def _outside(x: Array, lo: Array, hi: Array) -> Array:
-    """True where x is not inside [lo, hi] (NaN counts as outside)."""
-    return ~((x >= lo) & (x <= hi))
+class ExciterPorts(NamedTuple):
+    """Signals an exciter reads from its machine, arrays (n_exc,).
+
+    Attributes:
+      ec: terminal voltage magnitude, p.u.
+      vt: terminal voltage phasor, network frame, complex p.u.
+      it: machine current injected into the bus, network frame, complex p.u. on MBASE.
+      xadifd: field current XadIfd, p.u.
+      dw: speed deviation, p.u.
+    """
+
+    ec: Array
+    vt: Array
+    it: Array
+    xadifd: Array
+    dw: Array
 
 
 class ExciterModel(DeviceModel):
-    """An excitation-system family; `p` holds the CONs and, after `init`, `vref` (p.u.)."""
+    """An excitation-system family; `p` holds the CONs and, after `init`, `vref` (p.u.).
+    Its rates drive the machine's field voltage EFD (p.u.)."""
+
+    output = "efd"
 
     @classmethod
-    def prepare(cls, p: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Derived constants added at compile time (NumPy)."""
-        return p
+    def ports(cls, signals: Signals, k: Array, flags: States) -> ExciterPorts:
+        return ExciterPorts(ec=jnp.abs(signals.vt[k]), vt=signals.vt[k], it=signals.current[k],
+                            xadifd=signals.xadifd[k], dw=signals.dw[k])
 
     @classmethod
-    def init(cls, p: Params, efd0: Array, inp: ExciterInputs) -> tuple[Params, States]:
+    def init(cls, p: Params, efd0: Array, inp: ExciterPorts) -> tuple[Params, States]:
         """(params with `vref`, states) holding EFD = efd0 (p.u., (n,)) at equilibrium."""
         raise NotImplementedError
 
     @classmethod
-    def dynamics(cls, p: Params, x: States, inp: ExciterInputs) -> tuple[Array, States]:
+    def rates(cls, p: Params, x: States, inp: ExciterPorts) -> tuple[Array, States]:
         """(EFD (n,) p.u., {state: derivative per second})."""
         raise NotImplementedError
-
-    @classmethod
-    def init_violations(cls, p: Params, x: States) -> dict[str, Array]:
-        """{variable: (n,) bool}: units whose initial value lies outside its limits."""
-        return {name: _outside(x[name], lo, hi) for name, (lo, hi) in cls.limits(p).items()}
 
 
 # --------------------------------------------------------------------------- #
@@ -160,7 +171,7 @@ class Ieeet1(ExciterModel):
         return dict(p, vref=inp.ec + vr0 / p["ka"]), x
 
     @classmethod
-    def dynamics(cls, p, x, inp):
+    def rates(cls, p, x, inp):
         vm = jnp.where(p["tr"] > 0, x["vm"], inp.ec)
         vf = p["kf"] / safe(p[cls.feedback_tf]) * (x["efd"] - x["xf"])
         va, dx_comp = cls.regulator_input(p, x, p["vref"] - vm - vf)
@@ -176,7 +187,7 @@ class Ieeet1(ExciterModel):
     @classmethod
     def init_violations(cls, p, x):
         # x["vm"] is Ec at t = 0 whatever TR
-        return {"vr": _outside(x["vr"], *cls.regulator_bounds(p, x["vm"]))}
+        return {"vr": outside_limits(x["vr"], *cls.regulator_bounds(p, x["vm"]))}
 
 
 class Ieeex1(Ieeet1):
@@ -265,7 +276,7 @@ class Sexs(ExciterModel):
         return dict(p, vref=inp.ec + u0), {"xll": u0, "efd": efd0}
 
     @classmethod
-    def dynamics(cls, p, x, inp):
+    def rates(cls, p, x, inp):
         u = p["vref"] - inp.ec
         drive = p["k"] * lead_lag_output(x["xll"], u, p["tatb"] * p["tb"], p["tb"])
         efd = jnp.where(p["te"] > 0, x["efd"], jnp.clip(drive, p["emin"], p["emax"]))
@@ -309,7 +320,7 @@ class Esst3a(ExciterModel):
         return {"vr": (p["vrmin"], p["vrmax"]), "vm_inner": (p["vmmin"], p["vmmax"])}
 
     @classmethod
-    def exciter_voltage(cls, p: Params, inp: ExciterInputs) -> Array:
+    def exciter_voltage(cls, p: Params, inp: ExciterPorts) -> Array:
         """VB = min(VE·FEX(IN), VBMAX), p.u.; 0 where VE = 0."""
         kpc = p["kp"] * jnp.exp(1j * jnp.deg2rad(p["thetap"]))
         ve = jnp.abs(kpc * inp.vt + 1j * (p["ki"] + kpc * p["xl"]) * inp.it)
@@ -330,7 +341,7 @@ class Esst3a(ExciterModel):
         return dict(p, vref=inp.ec + vi0), x
 
     @classmethod
-    def dynamics(cls, p, x, inp):
+    def rates(cls, p, x, inp):
         vm = jnp.where(p["tr"] > 0, x["vm"], inp.ec)
         vi = jnp.clip(p["vref"] - vm, p["vimin"], p["vimax"])
         drive_r = p["ka"] * lead_lag_output(x["xll"], vi, p["tc"], p["tb"])
@@ -348,7 +359,8 @@ class Esst3a(ExciterModel):
     @classmethod
     def init_violations(cls, p, x):
         # xll holds Vi0 at t = 0 whatever TB
-        return super().init_violations(p, x) | {"vi": _outside(x["xll"], p["vimin"], p["vimax"])}
+        return super().init_violations(p, x) | {"vi": outside_limits(x["xll"], p["vimin"],
+                                                                     p["vimax"])}
 
 
 class Exst1(ExciterModel):
@@ -378,7 +390,7 @@ class Exst1(ExciterModel):
         return None
 
     @classmethod
-    def output_bounds(cls, p: Params, inp: ExciterInputs) -> tuple[Array, Array]:
+    def output_bounds(cls, p: Params, inp: ExciterPorts) -> tuple[Array, Array]:
         """(lo, hi) of EFD, p.u.: Ec·VRMIN, Ec·VRMAX − KC·XadIfd."""
         return inp.ec * p["vrmin"], inp.ec * p["vrmax"] - p["kc"] * inp.xadifd
 
@@ -389,7 +401,7 @@ class Exst1(ExciterModel):
         return dict(p, vref=inp.ec + vi0, efd_max0=cls.output_bounds(p, inp)[1]), x
 
     @classmethod
-    def dynamics(cls, p, x, inp):
+    def rates(cls, p, x, inp):
         lo, hi = cls.output_bounds(p, inp)
         vm = jnp.where(p["tr"] > 0, x["vm"], inp.ec)
         # VF from the state-based EFD: identical to the output where TA > 0, and KF = 0 elsewhere
@@ -406,8 +418,8 @@ class Exst1(ExciterModel):
     @classmethod
     def init_violations(cls, p, x):
         # at t = 0: vm = Ec, xll = Vi0, vr = EFD0
-        return {"vi": _outside(x["xll"], p["vimin"], p["vimax"]),
-                "efd": _outside(x["vr"], x["vm"] * p["vrmin"], p["efd_max0"])}
+        return {"vi": outside_limits(x["xll"], p["vimin"], p["vimax"]),
+                "efd": outside_limits(x["vr"], x["vm"] * p["vrmin"], p["efd_max0"])}
 
 
 EXCITERS = {m.name: m for m in (Ieeet1, Ieeex1, Exdc1, Exdc2, Esdc1a, Sexs, Esst3a, Exst1)}

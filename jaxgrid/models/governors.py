@@ -7,17 +7,20 @@ output its mechanical power Pm (p.u. MBASE); time constants in seconds.
 
 Zero time constants bypass a lag (output = input, state held) where the structure allows;
 where a division remains the CON must be > 0 and such data are rejected when read.
-Non-windup limits freeze the derivative inside `dynamics` and are listed in `limits`, so
+Non-windup limits freeze the derivative inside `rates` and are listed in `limits`, so
 that the integrator can clip the state after every update (spec §0).
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
-from jaxgrid.models.base import (Array, Con, DeviceModel, ModelError, Params, States,
-                                 device_label, freeze_at_limits, lag, lead_lag_output)
+from jaxgrid.models.base import (Array, Con, DeviceModel, ModelError, Params, Signals, States,
+                                 device_label, freeze_at_limits, lag, lead_lag_output,
+                                 outside_limits)
 
 # Smallest gate opening used in the HYGOV head h = (q/g)², p.u.: a closed gate with
 # flow is unphysical; the floor keeps h finite (and differentiable) if the gate closes.
@@ -44,20 +47,24 @@ def _lag_output(x: Array, u: Array, t: Array) -> Array:
     return jnp.where(t > 0, x, u)
 
 
-def _outside(v: Array, lo: Array, hi: Array) -> Array:
-    return (v < lo) | (v > hi)
+class GovernorPorts(NamedTuple):
+    """What a governor reads from its machine: dw, the speed deviation Δω (n_gov,), p.u."""
+
+    dw: Array
 
 
 class GovernorModel(DeviceModel):
     """A turbine-governor family: Pm (p.u. MBASE) from the speed deviation Δω (p.u.).
 
-    `p` and states are dicts of arrays (n_gov,), one row per unit.
+    `p` and states are dicts of arrays (n_gov,), one row per unit. Its rates drive the
+    machine's mechanical power Pm.
     """
 
+    output = "pm"
+
     @classmethod
-    def prepare(cls, p: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Derived constants added at compile time (NumPy)."""
-        return p
+    def ports(cls, signals: Signals, k: Array, flags: States) -> GovernorPorts:
+        return GovernorPorts(dw=signals.dw[k])
 
     @classmethod
     def init(cls, p: Params, pm0) -> tuple[Params, States]:
@@ -65,8 +72,8 @@ class GovernorModel(DeviceModel):
         raise NotImplementedError
 
     @classmethod
-    def dynamics(cls, p: Params, x: States, dw) -> tuple[Array, States]:
-        """(Pm (n,) p.u. MBASE, {state: d/dt}) at speed deviation Δω (n,) p.u."""
+    def rates(cls, p: Params, x: States, ports: GovernorPorts) -> tuple[Array, States]:
+        """(Pm (n,) p.u. MBASE, {state: d/dt}) at speed deviation ports.dw (n,) p.u."""
         raise NotImplementedError
 
 
@@ -103,7 +110,8 @@ class Tgov1(_ValveLimited):
         return dict(p, pref=p["r"] * pm0), {"x1": pm0, "x2": pm0}
 
     @classmethod
-    def dynamics(cls, p, x, dw):
+    def rates(cls, p, x, ports):
+        dw = ports.dw
         dx1 = ((p["pref"] - dw) / p["r"] - x["x1"]) / p["t1"]
         dx = {"x1": freeze_at_limits(dx1, x["x1"], p["vmin"], p["vmax"]),
               "x2": (x["x1"] - x["x2"]) / p["t3"]}
@@ -179,7 +187,8 @@ class Ieeeg1(GovernorModel):
         return dict(p, p0=pgv0), x
 
     @classmethod
-    def dynamics(cls, p, x, dw):
+    def rates(cls, p, x, ports):
+        dw = ports.dw
         speed = p["k"] * lead_lag_output(x["x_ll"], dw, p["t2"], p["t1"])
         valve_speed = jnp.clip((p["p0"] - speed - x["pgv"]) / p["t3"], p["uc"], p["uo"])
         dx = {"x_ll": lag(x["x_ll"], dw, p["t1"]),
@@ -218,7 +227,8 @@ class Gast(_ValveLimited):
         return dict(p, lref=pm0), {"x1": pm0, "x2": pm0, "x3": pm0}
 
     @classmethod
-    def dynamics(cls, p, x, dw):
+    def rates(cls, p, x, ports):
+        dw = ports.dw
         demand = p["lref"] - dw / p["r"]
         load_limit = p["at"] + p["kt"] * (p["at"] - x["x3"])
         dx1 = (jnp.minimum(demand, load_limit) - x["x1"]) / p["t1"]
@@ -277,7 +287,8 @@ class Ieesgo(GovernorModel):
         return dict(p, p0=pm0), x
 
     @classmethod
-    def dynamics(cls, p, x, dw):
+    def rates(cls, p, x, ports):
+        dw = ports.dw
         lead = lead_lag_output(x["x_ll"], dw, p["t2"], p["t_ll"])
         speed = p["k1"] * _lag_output(x["x_lag"], lead, p["t_lag"])
         pgv = jnp.clip(p["p0"] - speed, p["pmin"], p["pmax"])
@@ -294,7 +305,7 @@ class Ieesgo(GovernorModel):
     @classmethod
     def init_violations(cls, p, x):
         """Valve position Pgv0 = P0 outside the hard clip [PMIN, PMAX]."""
-        return {"pgv": _outside(p["p0"], p["pmin"], p["pmax"])}
+        return {"pgv": outside_limits(p["p0"], p["pmin"], p["pmax"])}
 
 
 class Hygov(GovernorModel):
@@ -336,7 +347,8 @@ class Hygov(GovernorModel):
         return dict(p, nref=p["r"] * q0), x
 
     @classmethod
-    def dynamics(cls, p, x, dw):
+    def rates(cls, p, x, ports):
+        dw = ports.dw
         c = x["xi"] + x["x1"] / p["r_temp"]
         e = p["nref"] - dw - p["r"] * c
         rate = jnp.clip(x["x1"] / (p["r_temp"] * p["tr"]), -p["velm"], p["velm"])
@@ -354,7 +366,7 @@ class Hygov(GovernorModel):
     @classmethod
     def init_violations(cls, p, x):
         """Gate g0 = xi0 = q0 outside [GMIN, GMAX]."""
-        return {"g": _outside(x["g"], p["gmin"], p["gmax"])}
+        return {"g": outside_limits(x["g"], p["gmin"], p["gmax"])}
 
 
 GOVERNORS = {m.name: m for m in (Tgov1, Ieeeg1, Gast, Ieesgo, Hygov)}

@@ -49,7 +49,8 @@ import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
 from jaxgrid.models.acmotor import MotorOptions
-from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, ModelError, Params, States,
+from jaxgrid.models.base import (Array, Con, LoadModel, LoadPorts, LoadSite, ModelError,
+                                 Params, States,
                                  device_label, quadratic_saturation,
                                  quadratic_saturation_constants, safe, saturation_problem,
                                  timer_fires)
@@ -222,28 +223,30 @@ class Cim5bl(LoadModel):
     # ------------------------------------------------------------------ #
 
     @classmethod
-    def _emfs(cls, p: Params, x: States):
+    def emfs(cls, p: Params, x: States):
         """(E', ψk, E'') network frame, complex (n,)."""
         ep = x["epr"] + 1j * x["epi"]
         psik = x["psir"] + 1j * x["psii"]
         return ep, psik, p["k5"] * ep + p["k4"] * psik
 
     @classmethod
-    def _stator_current(cls, p: Params, epp: Array, v: Array) -> Array:
+    def stator_current(cls, p: Params, epp: Array, v: Array) -> Array:
         """Current drawn, p.u. on Sm: (V − E'')/(RA + jL'')."""
         return (v - epp) / (p["ra"] + 1j * p["lpp"])
 
     @classmethod
     def current(cls, p: Params, x: States, z: States, v: Array) -> Array:
         """(n,) complex current drawn at bus voltage v, p.u. system base (0 once tripped)."""
-        _, _, epp = cls._emfs(p, x)
-        return z["status"] * p["sm"] * cls._stator_current(p, epp, v)
+        _, _, epp = cls.emfs(p, x)
+        return z["status"] * p["sm"] * cls.stator_current(p, epp, v)
 
     @classmethod
-    def derivative(cls, p: Params, x: States, z: States, v: Array) -> States:
-        """d/dt of E', ψk (p.u./s) and ω (p.u./s) at bus voltage v (spec §4); 0 once tripped."""
-        ep, psik, epp = cls._emfs(p, x)
-        i = cls._stator_current(p, epp, v)
+    def rates(cls, p: Params, x: States, ports: LoadPorts) -> tuple[None, States]:
+        """(None, d/dt of E', ψk (p.u./s) and ω (p.u./s)) at bus voltage ports.v (spec §4);
+        0 once tripped (flag `status`)."""
+        v = ports.v
+        ep, psik, epp = cls.emfs(p, x)
+        i = cls.stator_current(p, epp, v)
         slip = 1.0 - x["w"]
         delta = ep - psik + 1j * (p["lp"] - p["ll"]) * i
         tpp0 = safe(p["tpp0"])
@@ -255,9 +258,9 @@ class Cim5bl(LoadModel):
         te = jnp.real(epp * jnp.conj(i))
         dw = (te - cls.load_torque(p, x["w"])) / (2.0 * p["h"])
         dw = jnp.where(x["w"] <= 0.0, jnp.maximum(dw, 0.0), dw)
-        on = z["status"]
-        return {"epr": on * jnp.real(dep), "epi": on * jnp.imag(dep),
-                "psir": on * jnp.real(dpsik), "psii": on * jnp.imag(dpsik), "w": on * dw}
+        on = ports.flags["status"]
+        return None, {"epr": on * jnp.real(dep), "epi": on * jnp.imag(dep),
+                      "psir": on * jnp.real(dpsik), "psii": on * jnp.imag(dpsik), "w": on * dw}
 
     @classmethod
     def stiff_rates(cls, p: Params, x: States, z: States) -> dict[tuple[str, str], Array]:
@@ -265,7 +268,7 @@ class Cim5bl(LoadModel):
         (n,), 1/s: the stator's short-circuit decay and the slip rotation −j·ωb·s, which an
         explicit step cannot follow once a motor stalls (|ωb·s| ≈ 377 1/s). Saturation is
         frozen at the step's start; ψk has none without a second cage."""
-        _, _, epp = cls._emfs(p, x)
+        _, _, epp = cls.emfs(p, x)
         y = 1.0 / (p["ra"] + 1j * p["lpp"])
         rotation = -1j * p["omega_b"] * (1.0 - x["w"])
         se = quadratic_saturation(jnp.abs(epp), p["sat_a"], p["sat_b"])
@@ -291,8 +294,8 @@ class Cim5bl(LoadModel):
     @classmethod
     def electrical_torque(cls, p: Params, x: States, v: Array) -> Array:
         """Air-gap torque Te = Re(E''·conj(I)), p.u. on Sm (diagnostics)."""
-        _, _, epp = cls._emfs(p, x)
-        return jnp.real(epp * jnp.conj(cls._stator_current(p, epp, v)))
+        _, _, epp = cls.emfs(p, x)
+        return jnp.real(epp * jnp.conj(cls.stator_current(p, epp, v)))
 
 
 class Cim6bl(Cim5bl):

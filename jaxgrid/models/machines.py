@@ -15,12 +15,15 @@ it (14 per step, 4 since this split, 39-bus study).
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.models.base import (Con, DeviceModel, Params, States, quadratic_saturation,
-                                 quadratic_saturation_constants, saturation_problem)
+from jaxgrid.models.base import (Array, Con, DeviceModel, Params, Signals, States,
+                                 quadratic_saturation, quadratic_saturation_constants,
+                                 saturation_problem)
 from jaxgrid.vecmath import power, sincos
 
 _H = Con("h", "s", "inertia constant on MBASE (0: infinite bus, GENCLS only)", 0.0)
@@ -54,13 +57,29 @@ def swing(p: Params, x: States, pm, te, omega_b: float) -> States:
     return {"delta": jnp.where(moving, omega_b * dw, 0.0), "dw": jnp.where(moving, ddw, 0.0)}
 
 
+class MachinePorts(NamedTuple):
+    """What a machine reads, arrays (n,).
+
+    Attributes:
+      i_dq: injected current, rotor frame, id + j·iq, complex p.u. MBASE.
+      efd: field voltage, p.u.
+      pm: mechanical power, p.u. MBASE.
+      omega_b: base angular frequency, rad/s (Python float).
+    """
+
+    i_dq: Array
+    efd: Array
+    pm: Array
+    omega_b: float
+
+
 class MachineModel(DeviceModel):
     """A synchronous machine family. `p` also holds `ra`, `xs` (Norton impedance) and `mbase`."""
 
     @classmethod
-    def prepare(cls, p: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Derived constants added at compile time (NumPy)."""
-        return p
+    def ports(cls, signals: Signals, k: Array, flags: States) -> MachinePorts:
+        return MachinePorts(i_dq=signals.i_dq[k], efd=signals.efd[k], pm=signals.pm[k],
+                            omega_b=signals.omega_b)
 
     @classmethod
     def source_reactance(cls, p: dict[str, np.ndarray]) -> np.ndarray:
@@ -88,8 +107,8 @@ class MachineModel(DeviceModel):
         return i * jnp.conj(to_network_frame(x["delta"]))
 
     @classmethod
-    def derivative(cls, p: Params, x: States, i_dq, efd, pm, omega_b: float) -> States:
-        """State derivatives given the injected current i_dq (rotor frame, MBASE)."""
+    def rates(cls, p: Params, x: States, ports: MachinePorts) -> tuple[None, States]:
+        """(None, state derivatives) at the ports' injected current, EFD and Pm."""
         raise NotImplementedError
 
     @classmethod
@@ -127,8 +146,8 @@ class Gencls(MachineModel):
         return 1j * p["e_mag"]  # e_mag·exp(jδ) in the network frame
 
     @classmethod
-    def derivative(cls, p, x, i_dq, efd, pm, omega_b):
-        return swing(p, x, pm, cls.electrical_power(p, x, i_dq), omega_b)
+    def rates(cls, p, x, ports):
+        return None, swing(p, x, ports.pm, cls.electrical_power(p, x, ports.i_dq), ports.omega_b)
 
     @classmethod
     def field_current(cls, p, x, i_dq):
@@ -235,7 +254,8 @@ class Genrou(MachineModel):
                 + p["k1d"] * (x["eq1"] - x["psikd"] - (p["xpd"] - p["xl"]) * i_d) + sat_d)
 
     @classmethod
-    def derivative(cls, p, x, i_dq, efd, pm, omega_b):
+    def rates(cls, p, x, ports):
+        i_dq, efd = ports.i_dq, ports.efd
         i_d, i_q = jnp.real(i_dq), jnp.imag(i_dq)
         _, sat_q = cls._saturation_terms(p, x)
         xaqi1q = (x["ed1"] - (p["xq"] - p["xpq"]) * i_q
@@ -244,7 +264,8 @@ class Genrou(MachineModel):
               "ed1": -xaqi1q / p["tpqo"],
               "psikd": (x["eq1"] - x["psikd"] - (p["xpd"] - p["xl"]) * i_d) / p["tppdo"],
               "psikq": (x["ed1"] - x["psikq"] + (p["xpq"] - p["xl"]) * i_q) / p["tppqo"]}
-        return dx | swing(p, x, pm, cls.electrical_power(p, x, i_dq), omega_b)
+        return None, dx | swing(p, x, ports.pm, cls.electrical_power(p, x, i_dq),
+                                ports.omega_b)
 
 
 class Gensal(Genrou):
@@ -292,12 +313,14 @@ class Gensal(Genrou):
                 + p["k1d"] * (x["eq1"] - x["psikd"] - (p["xpd"] - p["xl"]) * i_d) + se * x["eq1"])
 
     @classmethod
-    def derivative(cls, p, x, i_dq, efd, pm, omega_b):
+    def rates(cls, p, x, ports):
+        i_dq, efd = ports.i_dq, ports.efd
         i_d, i_q = jnp.real(i_dq), jnp.imag(i_dq)
         dx = {"eq1": (efd - cls.field_current(p, x, i_dq)) / p["tpdo"],
               "psikd": (x["eq1"] - x["psikd"] - (p["xpd"] - p["xl"]) * i_d) / p["tppdo"],
               "psiq2": (-x["psiq2"] + (p["xq"] - p["xppd"]) * i_q) / p["tppqo"]}
-        return dx | swing(p, x, pm, cls.electrical_power(p, x, i_dq), omega_b)
+        return None, dx | swing(p, x, ports.pm, cls.electrical_power(p, x, i_dq),
+                                ports.omega_b)
 
 
 def exponential_saturation(x, n, s1):
