@@ -185,7 +185,7 @@ class OperatingPoint:
 @dataclasses.dataclass(frozen=True)
 class BusTable:
     """The buses a study file can name, before compiling: the RAW buses and the composite
-    loads' internal buses (`jaxgrid.models.cmld.internal_buses`).
+    loads' internal buses (`jaxgrid.models.cmld_init.internal_buses`).
 
     Attributes:
       source: the case.  number: {lower-case name: bus number} ("bus504",
