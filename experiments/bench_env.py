@@ -19,8 +19,8 @@ import argparse  # noqa: E402
 
 import jax  # noqa: E402
 
+from baselines.controllers import no_control  # noqa: E402
 from experiments.bench_sim import sharded_timings, write_report  # noqa: E402
-from experiments.evaluate import no_control  # noqa: E402
 from jaxgrid.study import load_study  # noqa: E402
 
 
