@@ -1,8 +1,9 @@
 """Checkpoints (orbax-checkpoint) and saved policies.
 
 A checkpoint holds the TrainState (θ, normaliser, PRNG key, iteration, α, ν) and a JSON
-part (config, metrics so far). A saved policy is `policy.json` (architecture and whatever
-the trainer adds) + `policy.npz` (θ, observation mean and std), loadable without orbax.
+part (config, metrics so far). A saved policy is a folder of `policy.json` ("spec": the
+architecture, and whatever the trainer adds; other learners add "kind") + `policy.npz` (the
+arrays: θ, observation mean and std for PARS), loadable without orbax.
 """
 from __future__ import annotations
 
@@ -72,8 +73,8 @@ def load_policy(directory: str | Path):
     """(Policy, (θ, mean, std), info dict) from a folder written by `save_policy`."""
     folder = Path(directory)
     info = read_policy_info(folder)
-    if info.get("kind") == "ppo":
-        raise ValueError(f"{folder}: a PPO policy (baselines.ppo): use ppo:PATH")
+    if info.get("kind") is not None:  # other learners' policies name their kind
+        raise ValueError(f"{folder}: a {info['kind']!r} policy, not a PARS one")
     spec = info["spec"]
     policy = Policy(PolicySpec(**{**spec, "hidden": tuple(spec["hidden"])}))
     arrays = np.load(folder / "policy.npz")

@@ -8,11 +8,12 @@ One jit-compiled function does a whole iteration:
      device mesh, `jax.sharding`) of a vmap over the m tasks: a task's data (its grid
      model) is shared by its 2N rollouts and each vector by its m rollouts, so the policy
      runs as 2N batched products over the tasks; observations normalised by the frozen
-     running stats. Both vmaps are `jaxgrid.batching.vmap_minor` (a generic vmap, nothing
-     grid-specific), which keeps the batch as every array's last axis: the 2N vectors the
-     minor one, so XLA:CPU's loops run over them. The policy itself runs batch-first
-     (`batch_major`, θ kept batch-first), so each direction's weights are read in place.
-     With `task_batch`, the tasks run in batches of that many, one batch after another;
+     running stats. Both vmaps are passed in (`Vmaps`, default `jax.vmap`); a grid passes
+     `jaxgrid.batching.vmap_minor`, which keeps the batch as every array's last axis (the
+     2N vectors the minor one, so XLA:CPU's loops run over them), with the policy network
+     run batch-first (`batch_major`, θ kept batch-first) so each direction's weights are
+     read in place. With `task_batch`, the tasks run in batches of that many, one batch
+     after another;
   4. average the returns per ± direction, keep the top b directions by max(r+, r−);
   5. θ += α / (b·σ_b) Σ_top (r+ − r−)·δ, σ_b the std of the 2b selected returns (1 if 0);
   6. α ← ε·α, ν ← ε·ν; merge the observation statistics of every rollout.
@@ -24,6 +25,7 @@ same shapes reuse the compilation. Nothing here knows about grids.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -34,7 +36,6 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from ars import normalizer
 from ars.normalizer import RunningStats
 from ars.policies import Policy
-from jaxgrid.batching import batch_major, vmap_minor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,6 +78,26 @@ class ParsConfig:
                 raise ValueError(f"{name} = {getattr(self, name)!r}: allowed {allowed}")
 
 
+def _unchanged(fun: Callable) -> Callable:
+    return fun
+
+
+@dataclasses.dataclass(frozen=True)
+class Vmaps:
+    """How an iteration batches its rollouts: `jax.vmap`-like transforms (default `jax.vmap`).
+
+    Attributes:
+      thetas: `thetas(fun)(thetas)`, `fun` batched over the (2N, size) perturbed vectors.
+      tasks: `tasks(fun)(tasks)`, `fun` batched over a batch of tasks (leading axis).
+      network: applied to the policy network `apply(θ, obs, carry)` before the vmaps meet
+        it (e.g. `jaxgrid.batching.batch_major`); default unchanged.
+    """
+
+    thetas: Callable = jax.vmap
+    tasks: Callable = jax.vmap
+    network: Callable = _unchanged
+
+
 @struct.dataclass
 class TrainState:
     """Everything an iteration changes.
@@ -112,15 +133,16 @@ def _init(policy: Policy, config: ParsConfig, key) -> TrainState:
                       noise=jnp.asarray(config.noise, jnp.float32))
 
 
-def normalized_policy(policy: Policy):
+def normalized_policy(policy: Policy, network: Callable = _unchanged):
     """policy_apply(params, obs, carry) with params = (θ, mean, std) that normalises the
-    observation and accumulates its sums (count, Σx, Σx²) in the carry. The network runs
-    `batch_major` (per-direction weights batch-first for XLA's batched product)."""
+    observation and accumulates its sums (count, Σx, Σx²) in the carry. The network runs as
+    `network(policy.apply)` (`Vmaps.network`)."""
+    net = network(policy.apply)
 
     def apply(params, obs, carry):
         theta, mean, std = params
         net_carry, (count, total, total_sq) = carry
-        action, net_carry = batch_major(policy.apply)(theta, (obs - mean) / std, net_carry)
+        action, net_carry = net(theta, (obs - mean) / std, net_carry)
         c, s, s2 = normalizer.sums(obs)
         return action, (net_carry, (count + c, total + s, total_sq + s2))
 
@@ -170,7 +192,8 @@ def _in_batches(run, tasks, size: int):
 
 
 def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
-                   mesh: Mesh | None = None, seeds: int | None = None):
+                   mesh: Mesh | None = None, seeds: int | None = None,
+                   vmaps: Vmaps = Vmaps()):
     """`iteration(state, tasks, data) -> (state, metrics)`, jit-compiled (`iteration.compiled`).
 
     episode(policy_apply, policy_params, task, policy_carry, data) -> dict with "reward" ()
@@ -179,7 +202,8 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
     task indices (default: m distinct tasks uniformly). The 2N perturbed vectors are sharded
     over `mesh` (1-D, axis "batch"; default all devices). With `seeds`, the state (from
     `init_state(..., seeds)`) and the metrics have a leading seed axis: independent trainings
-    of one configuration vmapped into one program, sharing the tasks and data.
+    of one configuration vmapped into one program, sharing the tasks and data. `vmaps`:
+    how the rollouts are batched.
     """
     m = config.tasks_per_iteration
     mesh = mesh or Mesh(np.array(jax.devices()), ("batch",))
@@ -188,7 +212,7 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
         raise ValueError(f"2·directions = {2 * n_dir} perturbed policies do not split over "
                          f"{mesh.size} devices")
     spread = NamedSharding(mesh, PartitionSpec("batch"))
-    apply = normalized_policy(policy)
+    apply = normalized_policy(policy, vmaps.network)
     carry0 = initial_carry(policy)
 
     def iteration(state: TrainState, tasks, data):
@@ -204,9 +228,9 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
         mean, std = state.stats.mean, state.stats.std
 
         def per_batch(batch):  # (c, ...) tasks -> (2N, c, ...) episode results
-            return vmap_minor(lambda theta: vmap_minor(
-                lambda task: episode(apply, (theta, mean, std), task, carry0, data))(batch),
-                first=True)(thetas)
+            return vmaps.thetas(lambda theta: vmaps.tasks(
+                lambda task: episode(apply, (theta, mean, std), task, carry0, data))(batch))(
+                    thetas)
 
         out = _in_batches(per_batch, picked, config.task_batch or m)  # (2N, m, ...)
         returns = clean_returns(out["reward"].mean(axis=1))

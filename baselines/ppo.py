@@ -64,7 +64,8 @@ from rejax.networks import GaussianPolicy
 
 from jaxgrid.env import EnvParams, EnvState, LoadSheddingEnv
 from jaxgrid.grid import GridModel
-from jaxgrid.study import Study, at_point
+from jaxgrid.rollouts import at_point
+from jaxgrid.study import Study
 from jaxgrid.tasks import PointTask
 
 # --------------------------------------------------------------------------- #
@@ -397,7 +398,7 @@ _APPLY: dict = {}
 
 def cached_apply(info: PolicyInfo):
     """`make_apply(info)`, one function per architecture, so repeated evaluations
-    (`jaxgrid.study.rollout_specs` caches by function) reuse their compilation."""
+    (`jaxgrid.rollouts.rollout_specs` caches by function) reuse their compilation."""
     if info not in _APPLY:
         _APPLY[info] = make_apply(info)
     return _APPLY[info]

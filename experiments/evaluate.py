@@ -11,8 +11,9 @@ with the study's operating points, make the set. Writes {"study", "controller", 
 "mean_reward", "total_shed_mw"}} and the resolved study beside it (OUT.study.toml). With
 --plot, draws for the lowest-reward tasks (--plot-count) the observed bus voltages against
 the recovery envelope and the total load shed against time. All operating points run in one
-compiled, vmapped call. A saved policy (PARS: policy:PATH, PPO: ppo:PATH, a folder written by
-`experiments.train` or `experiments.train_ppo`) must observe and act on the study's buses.
+compiled, vmapped call. The controllers are `baselines.controllers`'; a saved policy (PARS:
+policy:PATH, PPO: ppo:PATH, a folder written by `experiments.train` or
+`experiments.train_ppo`) must observe and act on the study's buses.
 """
 from __future__ import annotations
 
@@ -21,73 +22,14 @@ import json
 import sys
 from pathlib import Path
 
-import jax.numpy as jnp
 import numpy as np
 
+from baselines.controllers import check_layout, controller, saved_policy
 from experiments.studyargs import add_study_arguments, study_from_args
-from jaxgrid.env import LoadSheddingEnv
 from jaxgrid.recovery import envelope
-from jaxgrid.study import Study, bus_number, rollout_specs, write_study
+from jaxgrid.rollouts import rollout_specs
+from jaxgrid.study import Study, bus_number, write_study
 from jaxgrid.tasks import TaskSet
-
-
-def no_control(env: LoadSheddingEnv):
-    """(policy_apply, params, carry) of a controller that never sheds."""
-    n = len(env.action_slots)
-    return (lambda params, obs, carry: (jnp.zeros(n), carry)), None, None
-
-
-def saved_policy(control: str):
-    """(Policy, (θ, mean, std), info) of a "policy:PATH" controller, (PolicyInfo, params,
-    info) of a "ppo:PATH" one, read once; else None."""
-    if control.startswith("ppo:"):
-        from baselines.ppo import load_policy as load_ppo
-        return load_ppo(control.removeprefix("ppo:"))
-    if not control.startswith("policy:"):
-        return None
-    from ars.checkpoint import load_policy
-    return load_policy(control.removeprefix("policy:"))
-
-
-def check_layout(control: str, info: dict, study: Study, env: LoadSheddingEnv) -> None:
-    """ValueError naming both layouts if a saved policy observes or acts on other buses."""
-    from experiments.train import layout
-
-    trained = info.get("layout")
-    here = layout(env.config)
-    if trained is not None and trained != here:
-        raise ValueError(f"{control} (trained on study {info.get('study')!r}) has the layout "
-                         f"{trained}; study {study.name!r} has {here}")
-
-
-def controller(spec: str, env: LoadSheddingEnv, saved=None):
-    """(policy_apply, params, carry) for "none", "uvls", "mpc[:name=value,...]" (options of
-    `baselines.mpc.MpcOptions`), "policy:PATH" or "ppo:PATH" (`saved`: that policy as
-    `saved_policy` returns it, read from PATH if not given)."""
-    if spec == "none":
-        return no_control(env)
-    if spec == "uvls":
-        from baselines.uvls import uvls_policy
-        return uvls_policy(env)
-    if spec == "mpc" or spec.startswith("mpc:"):
-        from baselines.mpc import mpc_controller, parse_options
-        return mpc_controller(env, parse_options(spec.removeprefix("mpc").removeprefix(":")))
-    if spec.startswith("policy:"):
-        from ars.pars import initial_carry, normalized_policy
-        policy, params, _ = saved or saved_policy(spec)
-        if policy.spec.obs_size != env.config.history * env.obs_size:
-            raise ValueError(f"{spec}: the policy observes {policy.spec.obs_size} values, this "
-                             f"environment gives {env.config.history * env.obs_size}")
-        return normalized_policy(policy), params, initial_carry(policy)
-    if spec.startswith("ppo:"):
-        from baselines.ppo import cached_apply
-        info, params, _ = saved or saved_policy(spec)
-        if info.obs_size != env.config.history * env.obs_size:
-            raise ValueError(f"{spec}: the policy observes {info.obs_size} values, this "
-                             f"environment gives {env.config.history * env.obs_size}")
-        return cached_apply(info), params, None
-    raise ValueError(f"--controller {spec!r}: allowed none, uvls, mpc[:OPTIONS], policy:PATH "
-                     "or ppo:PATH")
 
 
 def task_specs(study: Study, tasks: str):

@@ -364,7 +364,7 @@ def _trained_policies(runs: Runs) -> dict:
 
 def tab3(runs: Runs, path) -> dict:
     """Decision latency of the trained PARS policies (their own widths and inputs), UVLS and
-    the MPC (`experiments.bench_latency`)."""
+    the MPC (`experiments.bench.latency`)."""
     from experiments.bench.latency import bench_study
 
     plt = _plt()

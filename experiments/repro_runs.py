@@ -2,8 +2,10 @@
 
 A run's folder (or file) under OUT/runs/ is named by what it is and a hash of everything it
 depends on: the study (its TOML text) and the run's settings. A finished run is reused; a
-training run that was interrupted resumes from its last checkpoint (the training commands'
-`--resume`); a changed input gives a new name, so nothing stale is ever read back.
+training run that was interrupted resumes from its last checkpoint; a changed input gives a
+new name, so nothing stale is ever read back. PARS trainings are library calls
+(`experiments.train.train_study`, named by their `ars.train.TrainConfig`), PPO trainings
+`experiments.train_ppo.main` with flags (its loop lives in the command).
 """
 from __future__ import annotations
 
@@ -20,8 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ars.pars import ParsConfig, init_state
+from ars.train import TrainConfig, make_trainer
 from experiments.repro_claims import best_ppo_seed
-from experiments.train import SMOOTHING, paper_preset, smoothed
+from experiments.train import SMOOTHING, paper_preset, smoothed, train_study, widths
+from jaxgrid.rollouts import rollout_specs, training_problem
 from jaxgrid.study import Study, load_study, write_study
 
 REPO = Path(__file__).resolve().parent.parent
@@ -51,7 +56,7 @@ class Settings:
       latency_calls: calls timed per controller (tab3).  window: moving-average window, its.
       policy, ppo_policy: an already trained PARS / PPO policy folder for the case studies,
         fig12 and tab3's evaluations in place of training one (None: train).
-      gpu_timing: an `experiments.bench_train` JSON measured on a GPU machine; fig7 adds its
+      gpu_timing: an `experiments.bench.train` JSON measured on a GPU machine; fig7 adds its
         1-device iteration time for this study and N = directions (None: none).
     """
 
@@ -114,23 +119,26 @@ class Runs:
         return folder
 
     # --- PARS ------------------------------------------------------------------------------
-    def pars_flags(self, policy: str, directions: int) -> list[str]:
-        """`experiments.train` flags of a PARS training of `policy` with N = directions,
-        b = N/2, the preset's widths and decay, the study's history for the policy kind and
-        its task sampling, `settings.seeds` seeds in one program."""
+    def pars_config(self, policy: str, directions: int) -> tuple[TrainConfig, dict]:
+        """(TrainConfig, `training_problem` arguments) of a PARS training of `policy` with
+        N = directions, b = N/2, the preset's widths and decay, the study's history for the
+        policy kind and its task sampling, `settings.seeds` seeds in one program (the
+        config's out and resume are `pars`'s)."""
         s = self.settings
-        return ["--policy", policy, "--hidden", "" if policy == "linear"
-                else self.preset["hidden"], "--directions", str(directions),
-                "--top", str(max(1, directions // 2)), "--decay", str(self.preset["decay"]),
-                "--history", str(self.study.history(policy)),
-                "--task-sampling", self.study.definition.training.task_sampling,
-                "--tasks-per-iteration", str(s.tasks_per_iteration),
-                "--iterations", str(s.iterations), "--seeds", str(s.seeds)]
+        pars = ParsConfig(directions=directions, top=max(1, directions // 2),
+                          decay=self.preset["decay"], tasks_per_iteration=s.tasks_per_iteration)
+        config = TrainConfig(policy=policy, hidden=() if policy == "linear"
+                             else widths(self.preset["hidden"]), pars=pars,
+                             iterations=s.iterations, seeds=s.seeds)
+        return config, {"history": self.study.history(policy),
+                        "sampling": self.study.definition.training.task_sampling}
 
     def pars_folder(self, policy: str, directions: int) -> Path:
-        """The run folder of that PARS training (made, not trained)."""
-        flags = self.pars_flags(policy, directions)
-        return self.folder(f"pars_{policy}_N{directions}", {"flags": flags})
+        """The run folder of that PARS training (made, not trained), named by its config."""
+        config, problem = self.pars_config(policy, directions)
+        inputs = {k: v for k, v in dataclasses.asdict(config).items()
+                  if k not in ("out", "resume")}
+        return self.folder(f"pars_{policy}_N{directions}", {"config": inputs, **problem})
 
     def pars_finished(self, folder: Path) -> bool:
         rows = metrics_rows(folder / "metrics.jsonl")
@@ -138,16 +146,16 @@ class Runs:
             folder / "policy").is_dir()
 
     def pars(self, policy: str, directions: int) -> Path:
-        """A finished PARS training (`pars_flags`); its folder."""
+        """A finished PARS training (`pars_config`, `experiments.train.train_study`); its
+        folder. An interrupted one resumes from its last checkpoint."""
         folder = self.pars_folder(policy, directions)
-        flags = self.pars_flags(policy, directions)
         self.trainings.add(folder)
         if self.pars_finished(folder):
             return folder
-        from experiments.train import main as train
-        resume = ["--resume"] if any((folder / "checkpoints").glob("[0-9]*")) else []
-        if train(["--study", str(self.study_file), *flags, "--out", str(folder), *resume]):
-            raise RuntimeError(f"PARS training in {folder} failed")
+        config, problem = self.pars_config(policy, directions)
+        resume = any((folder / "checkpoints").glob("[0-9]*"))
+        train_study(self.study, dataclasses.replace(config, out=str(folder), resume=resume),
+                    **problem)
         return folder
 
     def training_time(self) -> tuple[float, list[str]]:
@@ -240,7 +248,6 @@ class Runs:
         operating point, cached: t (s), vm (steps, observed buses) p.u., shed_mw cumulative,
         reward, recovered, observed (bus numbers)."""
         from experiments.evaluate import controlled_env
-        from jaxgrid.study import rollout_specs
         from jaxgrid.tasks import TaskSpec
 
         path = self.folder("trace", {**self._controller_inputs(control), "bus": fault_bus,
@@ -276,22 +283,21 @@ class Runs:
         import jax
         from jax.sharding import Mesh
 
-        from ars.pars import ParsConfig, init_state
-        from experiments.train import build
-
         s = self.settings
-        config = ParsConfig(directions=self.directions, top=max(1, self.directions // 2),
-                            tasks_per_iteration=s.tasks_per_iteration)
+        config = TrainConfig(policy="lstm", hidden=widths(self.preset["hidden"]),
+                             pars=ParsConfig(directions=self.directions,
+                                             top=max(1, self.directions // 2),
+                                             tasks_per_iteration=s.tasks_per_iteration))
         mesh = Mesh(np.array(jax.devices()[:devices]), ("batch",))
-        trainer = build(self.study, "lstm", _widths(self.preset["hidden"]), config,
-                        mesh=mesh)
-        state = init_state(trainer.policy, config)
-        state, _ = jax.block_until_ready(trainer.iteration(state, trainer.tasks, trainer.data))
+        problem = training_problem(self.study, "lstm")
+        trainer = make_trainer(problem, config, mesh)
+        state = init_state(trainer.policy, config.pars)
+        state, _ = jax.block_until_ready(trainer.iteration(state, problem.tasks, problem.data))
         times = []
         for _ in range(s.timing_iterations):
             start = time.perf_counter()
-            state, _ = jax.block_until_ready(trainer.iteration(state, trainer.tasks,
-                                                               trainer.data))
+            state, _ = jax.block_until_ready(trainer.iteration(state, problem.tasks,
+                                                               problem.data))
             times.append(time.perf_counter() - start)
         return float(np.median(times))
 
@@ -313,7 +319,10 @@ class Runs:
     def process_seconds(self, processes: int) -> float:
         """Median seconds per iteration of the same training as `iteration_seconds` run as
         `processes` processes of one CPU device each, joined by `jax.distributed` on loopback
-        (`experiments.train --coordinator`); the first iteration (compile) is left out."""
+        (`experiments.train --coordinator`); the first iteration (compile) is left out.
+        Fresh processes are needed here, not a library call: each process of the cluster
+        must call `jax.distributed.initialize` before anything touches JAX, and this
+        process has long since used it (with its own device count)."""
         s = self.settings
         folder = self.folder("processes", {"processes": processes, "settings": [
             self.directions, s.tasks_per_iteration, s.episode, s.timing_iterations]})
@@ -383,10 +392,6 @@ def _identity(control: str) -> str:
         if file.is_file():
             digest.update(file.read_bytes())
     return f"{kind}:{digest.hexdigest()[:10]}"
-
-
-def _widths(hidden: str) -> tuple[int, ...]:
-    return tuple(int(h) for h in hidden.split(",") if h)
 
 
 def metrics_rows(path: Path) -> list[dict]:

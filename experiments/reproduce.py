@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
                                     "(default: train one)")
     p.add_argument("--ppo-policy", help="a trained PPO policy folder for fig12, fig13 "
                                         "(default: train one)")
-    p.add_argument("--gpu-timing", help="an experiments.bench_train JSON measured on a GPU "
+    p.add_argument("--gpu-timing", help="an experiments.bench.train JSON measured on a GPU "
                                         "machine: fig7 adds its iteration time")
     args = p.parse_args(argv)
     overrides = {k: v for k, v in (("iterations", args.iterations), ("seeds", args.seeds),

@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.evaluate import no_control
+from baselines.controllers import no_control
 from experiments.studyargs import add_study_arguments, study_from_args
-from jaxgrid.study import Study, rebuild, rollout_specs
+from jaxgrid.rollouts import rollout_specs
+from jaxgrid.study import Study, rebuild
 
 ACCURACY_P99 = 1e-3  # p.u.: the largest p99 |ΔV| a study's default step may have
 ACCURACY_AT_CHECK = 5e-3  # p.u.: its largest |ΔV| at the recovery check

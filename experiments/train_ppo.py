@@ -42,7 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments.studyargs import add_study_arguments, study_from_args
-from experiments.train import device_label
+from ars.train import device_label
 
 # flag -> PPOConfig field (one-to-one; the defaults are PPOConfig's)
 FLAGS = {"envs": "envs", "rollout_steps": "rollout_steps", "epochs": "epochs",
@@ -146,8 +146,8 @@ def _train(args) -> int:
 
     from ars import checkpoint
     from baselines.ppo import gymnax_env, make_ppo, ppo_policy, save_policy
-    from experiments.train import layout
-    from jaxgrid.study import rollout_specs, write_study
+    from jaxgrid.rollouts import layout, rollout_specs
+    from jaxgrid.study import write_study
 
     config = config_from_args(args)
     if args.env_steps < 1 or args.eval_every < 1:

@@ -16,11 +16,11 @@ import time
 
 import numpy as np
 
+from baselines.controllers import no_control
 from baselines.mpc import mpc_controller, parse_options
 from experiments.bench.timing import write_report
-from experiments.evaluate import no_control
 from experiments.studyargs import add_study_arguments, study_from_args
-from jaxgrid.study import rollout_specs
+from jaxgrid.rollouts import rollout_specs
 
 
 def failing_tasks(study, env, tasks: str, count: int):

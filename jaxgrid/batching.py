@@ -37,7 +37,7 @@ fuse in a different order; tested).
 On a GPU the layout question differs: XLA:GPU assigns layouts itself and emits transposes as
 tiled kernels, and its step is launch-bound (docs/performance.md), so the CPU's transposed
 fusions may cost nothing there. Dropping `vmap_minor` for plain `jax.vmap` on a GPU would
-take: timing the PARS iteration (`experiments.bench_train`, 39- and 300-bus at the studies'
+take: timing the PARS iteration (`experiments.bench.train`, 39- and 300-bus at the studies'
 N) with both on one GPU and JAX release (the GPU figures on record predate this module);
 if `jax.vmap` is as fast, choosing by backend in this module alone (`jax.default_backend()`
 not "cpu": `vmap_minor` returns `jax.vmap(fun, in_axes, out_axes)`, `first` is ignored and

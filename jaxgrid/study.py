@@ -9,8 +9,8 @@
 A `Study` holds its `StudyDefinition` (everything that rebuilds it, serialisable to TOML),
 the operating points (solved cases of one grid) and their compiled models stacked into
 one `GridModel` pytree with a leading operating-point axis (`models`). That pytree is data:
-it is passed to compiled functions as an argument (`at_point` selects a point inside jit),
-so one compilation serves every operating point of the grid.
+it is passed to compiled functions as an argument (`jaxgrid.rollouts.at_point` selects a
+point inside jit), so one compilation serves every operating point of the grid.
 
 Built three ways:
   built-in: `jaxgrid.cases` FIDVR study cases ("ieee39_fidvr", "ieee300_fidvr") at one or
@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import functools
 import glob
 import re
 import tomllib
@@ -46,7 +45,6 @@ import warnings
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import tomli_w
 
@@ -130,7 +128,7 @@ class TrainingSettings:
 
     Attributes:
       history: {policy kind: observations stacked}; a kind not named stacks env.history.
-      task_sampling: "uniform" (m distinct tasks) or "stratified" (`stratified_sampler`).
+      task_sampling: "uniform" (m distinct tasks) or "stratified" (`jaxgrid.rollouts.stratified_sampler`).
     """
 
     history: dict = dataclasses.field(default_factory=dict)
@@ -263,86 +261,6 @@ class Study:
     def batch(self, specs) -> PointTask:
         """Stacked PointTask of specs (any operating points of this study)."""
         return task_batch(self.point(0), specs)
-
-
-def at_point(models: GridModel, point) -> GridModel:
-    """The model of operating point `point` (traced int) from stacked `models`, inside jit.
-
-    With one operating point the index is static, so nothing is gathered.
-    """
-    if jax.tree.leaves(models)[0].shape[0] == 1:
-        return jax.tree.map(lambda a: a[0], models)
-    return jax.tree.map(lambda a: a[point], models)
-
-
-def point_episode(env: LoadSheddingEnv, params: EnvParams):
-    """episode(policy_apply, policy_params, task: PointTask, policy_carry, models) -> dict:
-    `env.episode` at the task's operating point of stacked `models` (for `ars.pars`)."""
-
-    def episode(policy_apply, policy_params, task: PointTask, policy_carry, models):
-        return env.episode(policy_apply, policy_params, task.task, params,
-                           at_point(models, task.point), policy_carry)
-
-    return episode
-
-
-def rollout_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
-                  policy_carry=None, trace: bool = False):
-    """Every task of `specs` in one compiled call: a vmap over their operating points (models
-    batched) of `env.rollout` over each point's tasks (one model shared).
-
-    Every operating point of `specs` must have the same number of tasks (task sets do).
-    Returns (specs in the order of the results, `env.rollout`'s dict with a leading axis).
-    """
-    points = sorted({s.operating_point for s in specs})
-    groups = [[s for s in specs if s.operating_point == p] for p in points]
-    if len({len(g) for g in groups}) != 1:
-        raise ValueError("rollout_specs: every operating point needs the same number of tasks")
-    ordered = [s for g in groups for s in g]
-    shape = (len(points), len(groups[0]))
-    tasks = jax.tree.map(lambda a: a.reshape(shape + a.shape[1:]), study.batch(ordered).task)
-    models = jax.tree.map(lambda a: a[np.array(points)], study.models)
-    with jax.enable_x64(env.precision == "float64"):
-        out = _points_rollout(env, policy_apply, trace)(models, tasks, study.params,
-                                                        policy_params, policy_carry)
-    out = jax.tree.map(lambda a: np.asarray(a).reshape((len(ordered),) + a.shape[2:]), out)
-    return ordered, out
-
-
-@functools.lru_cache(maxsize=32)
-def _points_rollout(env: LoadSheddingEnv, policy_apply, trace: bool):
-    """jit of `env.rollout` vmapped over operating points (models and tasks batched), one
-    per (env, policy, trace), so repeated calls reuse the compilation."""
-
-    def run(models, tasks, params, policy_params, policy_carry):
-        return jax.vmap(lambda grid, task: env.rollout(
-            policy_apply, policy_params, task, params, grid, policy_carry, trace))(models, tasks)
-
-    return jax.jit(run)
-
-
-def stratified_sampler(task_set: TaskSet, n_points: int, m: int):
-    """sample(key) -> (m,) indices into `task_set.specs(n_points)`: as the PARS study, k_b
-    distinct fault buses × k_d distinct durations (k_b·k_d = m, k_d as large as the set
-    allows), each pair at a uniformly drawn operating point and start."""
-    n_p, n_s = len(task_set.points(n_points)), len(task_set.fault_starts)
-    n_b, n_d = len(task_set.fault_buses), len(task_set.fault_durations)
-    k_d = next((k for k in range(min(n_d, m), 0, -1) if m % k == 0 and m // k <= n_b), None)
-    if k_d is None:
-        raise ValueError(f"stratified sampling: m = {m} tasks are not k fault buses × k' "
-                         f"durations of this set ({n_b} buses, {n_d} durations)")
-    k_b = m // k_d
-
-    def sample(key):
-        k_bus, k_dur, k_point, k_start = jax.random.split(key, 4)
-        bus = jax.random.choice(k_bus, n_b, (k_b,), replace=False)
-        duration = jax.random.choice(k_dur, n_d, (k_d,), replace=False)
-        bus, duration = (a.reshape(-1) for a in jnp.meshgrid(bus, duration, indexing="ij"))
-        point = jax.random.randint(k_point, (m,), 0, n_p)
-        start = jax.random.randint(k_start, (m,), 0, n_s)
-        return ((point * n_s + start) * n_b + bus) * n_d + duration
-
-    return sample
 
 
 # --------------------------------------------------------------------------- #

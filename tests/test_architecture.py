@@ -11,7 +11,6 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 LIBRARY = ("jaxgrid", "ars", "baselines")
@@ -111,7 +110,6 @@ def test_no_command_line_code_in_the_library():
     assert not found, f"command-line code belongs in experiments/: {found}"
 
 
-@pytest.mark.xfail(strict=True, reason="issue 27: trainer helper")
 def test_ars_imports_nothing_from_jaxgrid():
     graph = import_graph()
     found = {name: sorted(m for m in deps if m.split(".")[0] == "jaxgrid")

@@ -14,11 +14,11 @@ import jax
 import numpy as np
 import pytest
 
-from experiments.evaluate import no_control
+from baselines.controllers import no_control
 from jaxgrid.env import EnvParams
 from jaxgrid.io.raw import read_raw
-from jaxgrid.study import (CompileSettings, at_point, builtin, from_files, read_study,
-                           rollout_specs, stratified_sampler, write_study)
+from jaxgrid.rollouts import at_point, rollout_specs, stratified_sampler
+from jaxgrid.study import CompileSettings, builtin, from_files, read_study, write_study
 from jaxgrid.tasks import TaskSet, TaskSpec
 
 BASE = "ieee39/IEEE39bus_multiloads_xfmr4_smallX_v30.raw"
@@ -101,16 +101,18 @@ def test_three_operating_points_one_compilation(uncontrolled):
 
 def test_pars_iteration_compiles_once_across_points_and_task_sets(pnnl39):
     from ars.pars import ParsConfig, init_state
-    from experiments.train import build
+    from ars.train import TrainConfig, make_trainer
+    from jaxgrid.rollouts import training_problem
 
     config = ParsConfig(directions=1, top=1, tasks_per_iteration=2)
-    trainer = build(pnnl39, "linear", (), config, history=1, episode=0.5)
+    problem = training_problem(pnnl39, "linear", history=1, episode=0.5)
+    trainer = make_trainer(problem, TrainConfig("linear", (), config))
     state = init_state(trainer.policy, config)
     for point in range(pnnl39.n_points):
         tasks = pnnl39.batch([TaskSpec(4, 0.05, 1.0, point), TaskSpec(15, 0.08, 1.0, point)])
-        state, metrics = trainer.iteration(state, tasks, trainer.data)
+        state, metrics = trainer.iteration(state, tasks, problem.data)
         assert np.isfinite(float(metrics["reward_mean"]))
-    state, _ = trainer.iteration(state, trainer.tasks, trainer.data)  # the 9 training tasks
+    state, _ = trainer.iteration(state, problem.tasks, problem.data)  # the 9 training tasks
     assert trainer.iteration.compiled._cache_size() == 2, \
         "one compilation per task-array shape (2 tasks, 9 tasks), none per operating point"
 

@@ -19,9 +19,10 @@ import pytest
 
 from conftest import REPO
 from experiments.evaluate import evaluate
-from experiments.train import main
-from experiments.train_39bus import DEFAULTS
+from experiments.train import PRESETS, main
 from jaxgrid.study import builtin, read_study
+
+DEFAULTS = PRESETS["train_39bus"]
 
 TINY = ["--policy", "linear", "--history", "1", "--directions", "1", "--top", "1",
         "--tasks-per-iteration", "1", "--episode", "0.5", "--checkpoint-every", "3",
@@ -43,18 +44,18 @@ def straight(tmp_path_factory):
 # however fast the machine is (a run that reached 12 first would leave nothing to resume).
 HANG_BEFORE_ITERATION_8 = """
 import sys, time
+import ars.train
 import experiments.train as train
-from experiments.train_39bus import DEFAULTS
-build = train.build
-def hanging_build(*args, **kwargs):
-    trainer = build(*args, **kwargs)
+make_trainer = ars.train.make_trainer
+def hanging_trainer(*args, **kwargs):
+    trainer = make_trainer(*args, **kwargs)
     def hang_after_7(state, tasks, data):
         if int(state.iteration) >= 7:
             time.sleep(3600)
         return trainer.iteration(state, tasks, data)
     return trainer._replace(iteration=hang_after_7)
-train.build = hanging_build
-sys.exit(train.main(sys.argv[1:], DEFAULTS))
+ars.train.make_trainer = hanging_trainer
+sys.exit(train.main(sys.argv[1:], train.PRESETS["train_39bus"]))
 """
 
 
@@ -185,16 +186,16 @@ def test_tasks_per_iteration_fits_the_set_or_names_the_flag():
 def test_a_training_error_starts_on_a_new_line(tmp_path, capsys, monkeypatch):
     """An error in an iteration closes the progress bar first, so the message has its own
     line."""
-    import experiments.train as train
+    import ars.train
 
-    build = train.build
+    make_trainer = ars.train.make_trainer
 
-    def failing_build(*args, **kwargs):
+    def failing_trainer(*args, **kwargs):
         def fail(state, tasks, data):
             raise ValueError("broken iteration")
-        return build(*args, **kwargs)._replace(iteration=fail)
+        return make_trainer(*args, **kwargs)._replace(iteration=fail)
 
-    monkeypatch.setattr(train, "build", failing_build)
+    monkeypatch.setattr(ars.train, "make_trainer", failing_trainer)
     assert main(TINY + ["--iterations", "2", "--out", str(tmp_path)], DEFAULTS) == 2
     err = capsys.readouterr().err
     assert "\nerror: broken iteration" in err, err

@@ -14,8 +14,8 @@ import argparse
 
 import jax
 
+from baselines.controllers import no_control
 from experiments.bench.timing import sharded_timings, write_report
-from experiments.evaluate import no_control
 from jaxgrid.study import load_study
 
 

@@ -26,8 +26,9 @@ import time
 import jax
 import jax.numpy as jnp
 
-from ars.pars import initial_carry, normalized_policy
+from ars.pars import initial_carry
 from ars.policies import Policy, PolicySpec
+from baselines.controllers import pars_apply
 from baselines.mpc import mpc_controller, parse_options
 from baselines.uvls import uvls_policy
 from experiments.bench.timing import write_report
@@ -59,7 +60,7 @@ def _controllers(study):
         theta = 0.1 * jax.random.normal(jax.random.PRNGKey(0), (policy.size,))
         params = (theta, jnp.zeros(spec.obs_size), jnp.ones(spec.obs_size))
         label = f"pars_{kind}" + (f"_{'x'.join(map(str, hidden))}" if hidden else "")
-        out.append((label, env, normalized_policy(policy), params, initial_carry(policy)))
+        out.append((label, env, pars_apply(policy), params, initial_carry(policy)))
     return out
 
 

@@ -23,13 +23,14 @@ import numpy as np
 from jax.sharding import Mesh
 
 from ars.pars import ParsConfig, init_state
-from experiments import train, train_39bus, train_300bus
+from ars.train import TrainConfig, make_trainer
 from experiments.bench.timing import timed, write_report
-from experiments.train import build
+from experiments.train import PRESETS
+from jaxgrid.rollouts import training_problem
 from jaxgrid.study import load_study
 
-DEFAULTS = {"ieee39_fidvr": train_39bus.DEFAULTS, "ieee300_fidvr": train_300bus.DEFAULTS}
-PLAIN = train.DEFAULTS
+DEFAULTS = {p["study"]: p for p in PRESETS.values() if p["study"]}
+PLAIN = PRESETS["train"]
 TASKS_PER_ITERATION = 9
 EPISODE = 10.0  # s
 
@@ -54,10 +55,12 @@ def bench_case(case: str, device_counts, repeats: int, task_batch: int | None = 
         for n_dev in device_counts:
             mesh = Mesh(np.array(jax.devices()[:n_dev]), ("batch",))
             start = time.perf_counter()
-            trainer = build(study, defaults["policy"], hidden, config, 1, EPISODE, mesh=mesh)
+            problem = training_problem(study, defaults["policy"], 1, EPISODE)
+            trainer = make_trainer(problem, TrainConfig(defaults["policy"], hidden, config),
+                                   mesh)
             build_s = time.perf_counter() - start
             state = init_state(trainer.policy, config)
-            data = jax.device_put((trainer.tasks, trainer.data))
+            data = jax.device_put((problem.tasks, problem.data))
 
             def step():
                 return trainer.iteration(state, *data)

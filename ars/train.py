@@ -1,0 +1,206 @@
+"""A PARS training run: `init_state`, then the jit-compiled iteration (`ars.pars`) in a Python
+loop that logs metrics, checkpoints, resumes and saves policies (the shape of google/brax's
+`agents/ars/train.py`, with the loop on the host so that it can checkpoint).
+
+Any environment works: `train` takes a `Problem`, what the environment side supplies (for
+a grid study, `jaxgrid.rollouts.training_problem`). Output folder `TrainConfig.out`:
+  metrics.jsonl   one line per iteration: iteration, reward_mean, reward_max, wall_s, rollouts
+                  (cumulative), env_steps (cumulative agent steps, where the episodes report
+                  "steps"), device ("COUNT × KIND")
+  checkpoints/    orbax checkpoints every checkpoint_every iterations and at the end
+  policy/         the trained policy (`ars.checkpoint.save_policy`)
+  policies/NNNNN/ the policy after iteration NNNNN, at every checkpoint
+and what `Problem.save` writes. With `seeds`, the metrics hold per-seed lists of reward_mean,
+reward_max and env_steps (rollouts counts one seed's) and each policy folder holds seed0/ ...
+Every process of a multi-process run computes the same replicated state; process 0 writes
+the files (orbax coordinates the checkpoints itself).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, NamedTuple, Protocol
+
+import jax
+import numpy as np
+
+from ars import checkpoint
+from ars.pars import ParsConfig, TrainState, init_state, make_iteration
+from ars.policies import Policy, PolicySpec
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """A training run. Each field is one flag of `experiments.train` (errors name the flags).
+
+    Attributes:
+      policy: the policy kind, "linear" | "fnn" | "lstm".  hidden: layer widths.
+      pars: the iteration's hyper-parameters (its seed is the first seed).
+      iterations: the run's total (when resuming: continue up to it).
+      seeds: K independent trainings (seeds pars.seed ... pars.seed + K − 1) vmapped into
+        one program, or None for one training without a seed axis.
+      checkpoint_every: iterations between checkpoints (and saved policies).
+      out: the output folder.  resume: continue from the last checkpoint in `out`.
+    """
+
+    policy: str = "lstm"
+    hidden: tuple[int, ...] = (32, 32)
+    pars: ParsConfig = ParsConfig()
+    iterations: int = 200
+    seeds: int | None = None
+    checkpoint_every: int = 10
+    out: str = "runs/study"
+    resume: bool = False
+
+    def __post_init__(self):
+        if self.iterations < 1 or self.checkpoint_every < 1 or (self.seeds or 1) < 1:
+            raise ValueError("--iterations, --checkpoint-every and --seeds must be >= 1")
+
+
+class Problem(Protocol):
+    """What `train` needs from the environment side.
+
+    Attributes:
+      episode: episode(policy_apply, policy_params, task, policy_carry, data) -> dict with
+        "reward" (), "policy_carry" and optionally "steps" () (`ars.pars.make_iteration`).
+      tasks: pytree of the training tasks, leading axis n_tasks.
+      data: pytree the episode reads (passed to the compiled iteration, not closed over).
+      obs_size: length of the policy's input.  action_size: length of its output.
+      action_low, action_high: the action range.
+      sampler: sampler(m) -> sample(key) -> (m,) task indices, or None (m distinct tasks
+        drawn uniformly).
+      vmaps: how the rollouts are batched (`ars.pars.Vmaps` or an object with its fields).
+      info: JSON-able run information, saved with every checkpoint and policy.
+    """
+
+    episode: Callable
+    tasks: Any
+    data: Any
+    obs_size: int
+    action_size: int
+    action_low: float
+    action_high: float
+    sampler: Callable | None
+    vmaps: Any
+    info: dict
+
+    def save(self, folder: Path) -> None:
+        """Write what rebuilds the environment into the run folder (process 0, at start)."""
+
+
+class Trainer(NamedTuple):
+    """The compiled iteration of a problem (`make_trainer`): iteration(state, tasks, data)
+    -> (state, metrics), the policy and its spec."""
+
+    iteration: Callable
+    policy: Policy
+    spec: PolicySpec
+
+
+def make_trainer(problem: Problem, config: TrainConfig, mesh=None) -> Trainer:
+    """The policy of `config` on the problem's sizes and its PARS iteration, the rollouts
+    sharded over `mesh` (default: all devices)."""
+    spec = PolicySpec(config.policy, problem.obs_size, problem.action_size, config.hidden,
+                      float(problem.action_low), float(problem.action_high))
+    policy = Policy(spec)
+    sample = (problem.sampler(config.pars.tasks_per_iteration)
+              if problem.sampler is not None else None)
+    iteration = make_iteration(problem.episode, policy, config.pars, sample, mesh,
+                               config.seeds, problem.vmaps)
+    return Trainer(iteration, policy, spec)
+
+
+class TrainResult(NamedTuple):
+    """What `train` returns: the final TrainState and the metrics lines of the whole run."""
+
+    state: TrainState
+    metrics: list
+
+
+def device_label(count: int) -> str:
+    """'COUNT × KIND' for `count` devices of this backend, e.g. '2 × cpu' (metrics lines)."""
+    return f"{count} × {jax.devices()[0].device_kind}"
+
+
+def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
+    """Train (or resume) the run of `config` on `problem` (module docstring); ValueError
+    if `out` holds a run and resume is off, or resume finds no fitting checkpoint."""
+    from tqdm import tqdm
+
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    mgr = checkpoint.manager(out / "checkpoints", config.checkpoint_every)
+    if not config.resume and mgr.latest_step() is not None:
+        raise ValueError(f"{out} already holds a run (checkpoint at iteration "
+                         f"{mgr.latest_step()}): pass --resume to continue it, or another --out")
+    if config.resume and (mgr.latest_step() or 0) > config.iterations:
+        raise ValueError(f"--resume: the checkpoint in {out} is at iteration "
+                         f"{mgr.latest_step()}, past --iterations {config.iterations}")
+    trainer = make_trainer(problem, config, mesh)
+    run_info = {**problem.info, "config": dataclasses.asdict(config.pars),
+                "seeds": config.seeds}
+    state, log = init_state(trainer.policy, config.pars, config.seeds), []
+    if config.resume:
+        restored = checkpoint.restore_latest(mgr, state)
+        if restored is None:
+            raise ValueError(f"--resume: no checkpoint in {out / 'checkpoints'}")
+        state, meta = restored
+        log = meta["metrics"]
+        if meta.get("seeds") != config.seeds:
+            raise ValueError(f"--resume: the run in {out} has --seeds {meta.get('seeds')}, "
+                             f"not {config.seeds}")
+    primary = jax.process_index() == 0
+    metrics_path = out / "metrics.jsonl"
+    if primary:
+        problem.save(out)
+        metrics_path.write_text("".join(json.dumps(m) + "\n" for m in log))
+    done = int(np.max(state.iteration))
+    rollouts = log[-1]["rollouts"] if log else 0
+    env_steps = np.array(log[-1].get("env_steps", 0) if log else 0, np.int64)  # per seed, wide
+    device = device_label(jax.device_count())
+    bar = tqdm(total=config.iterations, initial=done, unit="it", disable=not primary)
+    try:  # closing the bar ends its line, so an error starts on a new one
+        while done < config.iterations:
+            start = time.perf_counter()
+            state, metrics = trainer.iteration(state, problem.tasks, problem.data)
+            metrics = jax.device_get(metrics)
+            wall = time.perf_counter() - start
+            done, rollouts = done + 1, rollouts + int(np.ravel(metrics["rollouts"])[0])
+            row = {"iteration": done, "reward_mean": np.asarray(metrics["reward_mean"]).tolist(),
+                   "reward_max": np.asarray(metrics["reward_max"]).tolist(),
+                   "wall_s": round(wall, 3), "rollouts": rollouts}
+            if "env_steps" in metrics:
+                env_steps = env_steps + np.asarray(metrics["env_steps"], np.int64)
+                row["env_steps"] = env_steps.tolist()
+            row["device"] = device
+            log.append(row)
+            if primary:
+                with open(metrics_path, "a") as metrics_file:
+                    metrics_file.write(json.dumps(row) + "\n")
+            bar.set_postfix(mean=f"{np.mean(row['reward_mean']):.1f}",
+                            best=f"{np.max(row['reward_max']):.1f}", s_per_it=f"{wall:.2f}")
+            bar.update(1)
+            last = done == config.iterations
+            checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last, step=done)
+            if primary and (done % config.checkpoint_every == 0 or last):
+                save_policies(out / "policies" / f"{done:05d}", trainer.spec, state, run_info,
+                              config.seeds)
+    finally:
+        bar.close()
+    if primary:
+        save_policies(out / "policy", trainer.spec, state, run_info, config.seeds)
+    return TrainResult(state, log)
+
+
+def save_policies(folder: Path, spec: PolicySpec, state: TrainState, run_info: dict,
+                  seeds: int | None) -> None:
+    """The policy in `folder`, or with seeds each seed's in folder/seedI."""
+    if seeds is None:
+        checkpoint.save_policy(folder, spec, state, run_info)
+        return
+    for i in range(seeds):
+        checkpoint.save_policy(folder / f"seed{i}", spec, jax.tree.map(lambda a: a[i], state),
+                               {**run_info, "seed": run_info["config"]["seed"] + i})

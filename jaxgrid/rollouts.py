@@ -1,0 +1,188 @@
+"""The grid side of training and evaluation: episodes at a study's operating points.
+
+`at_point` picks an operating point of the stacked models inside jit; `point_episode` is the
+episode a trainer rolls out (`ars.pars.make_iteration`); `stratified_sampler` draws tasks
+as the PNNL PARS study does; `training_problem` bundles what `ars.train.train` needs from a
+study (its tasks, the models, the sizes, and `GRID_VMAPS`: rollouts batched with the batch
+as every array's minor axis, `jaxgrid.batching`); `rollout_specs` runs a controller on any
+tasks of a study in one compiled call (evaluation). Nothing here imports `ars`: the trainer's
+types are met by their fields.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxgrid.batching import batch_major, vmap_minor
+from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.grid import GridModel
+from jaxgrid.study import Study, write_study
+from jaxgrid.tasks import PointTask, TaskSet
+
+
+def at_point(models: GridModel, point) -> GridModel:
+    """The model of operating point `point` (traced int) from stacked `models`, inside jit.
+
+    With one operating point the index is static, so nothing is gathered.
+    """
+    if jax.tree.leaves(models)[0].shape[0] == 1:
+        return jax.tree.map(lambda a: a[0], models)
+    return jax.tree.map(lambda a: a[point], models)
+
+
+def point_episode(env: LoadSheddingEnv, params: EnvParams):
+    """episode(policy_apply, policy_params, task: PointTask, policy_carry, models) -> dict:
+    `env.episode` at the task's operating point of stacked `models` (for `ars.pars`)."""
+
+    def episode(policy_apply, policy_params, task: PointTask, policy_carry, models):
+        return env.episode(policy_apply, policy_params, task.task, params,
+                           at_point(models, task.point), policy_carry)
+
+    return episode
+
+
+def rollout_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
+                  policy_carry=None, trace: bool = False):
+    """Every task of `specs` in one compiled call: a vmap over their operating points (models
+    batched) of `env.rollout` over each point's tasks (one model shared).
+
+    Every operating point of `specs` must have the same number of tasks (task sets do).
+    Returns (specs in the order of the results, `env.rollout`'s dict with a leading axis).
+    """
+    points = sorted({s.operating_point for s in specs})
+    groups = [[s for s in specs if s.operating_point == p] for p in points]
+    if len({len(g) for g in groups}) != 1:
+        raise ValueError("rollout_specs: every operating point needs the same number of tasks")
+    ordered = [s for g in groups for s in g]
+    shape = (len(points), len(groups[0]))
+    tasks = jax.tree.map(lambda a: a.reshape(shape + a.shape[1:]), study.batch(ordered).task)
+    models = jax.tree.map(lambda a: a[np.array(points)], study.models)
+    with jax.enable_x64(env.precision == "float64"):
+        out = _points_rollout(env, policy_apply, trace)(models, tasks, study.params,
+                                                        policy_params, policy_carry)
+    out = jax.tree.map(lambda a: np.asarray(a).reshape((len(ordered),) + a.shape[2:]), out)
+    return ordered, out
+
+
+@functools.lru_cache(maxsize=32)
+def _points_rollout(env: LoadSheddingEnv, policy_apply, trace: bool):
+    """jit of `env.rollout` vmapped over operating points (models and tasks batched), one
+    per (env, policy, trace), so repeated calls reuse the compilation."""
+
+    def run(models, tasks, params, policy_params, policy_carry):
+        return jax.vmap(lambda grid, task: env.rollout(
+            policy_apply, policy_params, task, params, grid, policy_carry, trace))(models, tasks)
+
+    return jax.jit(run)
+
+
+def stratified_sampler(task_set: TaskSet, n_points: int, m: int):
+    """sample(key) -> (m,) indices into `task_set.specs(n_points)`: as the PARS study, k_b
+    distinct fault buses × k_d distinct durations (k_b·k_d = m, k_d as large as the set
+    allows), each pair at a uniformly drawn operating point and start."""
+    n_p, n_s = len(task_set.points(n_points)), len(task_set.fault_starts)
+    n_b, n_d = len(task_set.fault_buses), len(task_set.fault_durations)
+    k_d = next((k for k in range(min(n_d, m), 0, -1) if m % k == 0 and m // k <= n_b), None)
+    if k_d is None:
+        raise ValueError(f"stratified sampling: m = {m} tasks are not k fault buses × k' "
+                         f"durations of this set ({n_b} buses, {n_d} durations)")
+    k_b = m // k_d
+
+    def sample(key):
+        k_bus, k_dur, k_point, k_start = jax.random.split(key, 4)
+        bus = jax.random.choice(k_bus, n_b, (k_b,), replace=False)
+        duration = jax.random.choice(k_dur, n_d, (k_d,), replace=False)
+        bus, duration = (a.reshape(-1) for a in jnp.meshgrid(bus, duration, indexing="ij"))
+        point = jax.random.randint(k_point, (m,), 0, n_p)
+        start = jax.random.randint(k_start, (m,), 0, n_s)
+        return ((point * n_s + start) * n_b + bus) * n_d + duration
+
+    return sample
+
+
+class MinorVmaps(NamedTuple):
+    """How a grid's rollouts are batched in a PARS iteration (the fields of `ars.pars.Vmaps`):
+    both vmaps keep the batch as every array's last axis (`jaxgrid.batching.vmap_minor`; the
+    perturbed θ stay batch-first), the policy network runs batch-first (`batch_major`)."""
+
+    thetas: Callable = functools.partial(vmap_minor, first=True)
+    tasks: Callable = vmap_minor
+    network: Callable = batch_major
+
+
+GRID_VMAPS = MinorVmaps()
+
+
+def layout(env_config: EnvConfig) -> dict:
+    """What a saved policy observes and acts on (checked when it is evaluated)."""
+    return {"observed_buses": list(env_config.observed_buses),
+            "action_buses": list(env_config.action_buses), "history": env_config.history,
+            "include_action_status": env_config.include_action_status}
+
+
+@dataclasses.dataclass(frozen=True)
+class GridProblem:
+    """A study's task set as a training problem (the fields of `ars.train.Problem`).
+
+    Attributes:
+      study: the study.  env: its environment as trained (history, episode).
+      episode: `point_episode`.  tasks: PointTask batch, each point an index into `data`.
+      data: the task set's operating points' models, stacked (n_points, ...).
+      obs_size: stacked observation length.  action_size: action buses.
+      action_low, action_high: the action range, p.u.
+      sampler: m -> `stratified_sampler`, or None (uniform).  vmaps: `GRID_VMAPS`.
+      info: the run information saved with checkpoints and policies (study, points, task
+        set, task sampling, layout, history, episode).
+    """
+
+    study: Study
+    env: LoadSheddingEnv
+    episode: Callable
+    tasks: PointTask
+    data: GridModel
+    obs_size: int
+    action_size: int
+    action_low: float
+    action_high: float
+    sampler: Callable | None
+    vmaps: MinorVmaps
+    info: dict
+
+    def save(self, folder: Path) -> None:
+        """The resolved study as folder/study.toml (a run folder alone reproduces it)."""
+        write_study(self.study, Path(folder) / "study.toml")
+
+
+def training_problem(study: Study, policy_kind: str, history: int | None = None,
+                     episode: float | None = None, task_set: str = "train",
+                     sampling: str | None = None) -> GridProblem:
+    """The task set `task_set` of `study` for a `policy_kind` policy: episodes of `episode` s
+    (default the study's), `history` observations stacked (default the study's for the kind),
+    tasks drawn by `sampling` ("uniform" | "stratified", default the study's). The data holds
+    only the set's operating points."""
+    history = study.history(policy_kind) if history is None else history
+    sampling = sampling or study.definition.training.task_sampling
+    overrides = {k: v for k, v in (("history", history), ("episode", episode)) if v is not None}
+    env = study.env(**overrides)
+    params = study.params
+    chosen = study.task_set(task_set)
+    points = chosen.points(study.n_points)
+    specs = [dataclasses.replace(s, operating_point=points.index(s.operating_point))
+             for s in study.tasks(task_set)]  # indices into the set's points, in order
+    info = {"study": study.name, "points": [p.label for p in study.points],
+            "task_set": task_set, "task_sampling": sampling, "layout": layout(env.config),
+            "history": env.config.history, "episode": env.config.episode}
+    return GridProblem(
+        study, env, point_episode(env, params), study.batch(specs),
+        jax.tree.map(lambda a: a[np.array(points)], study.models),
+        env.config.history * env.obs_size, len(env.action_slots), float(params.action_low),
+        float(params.action_high),
+        (functools.partial(stratified_sampler, chosen, study.n_points)
+         if sampling == "stratified" else None), GRID_VMAPS, info)
