@@ -13,10 +13,10 @@ import jax
 import numpy as np
 import pytest
 
-from experiments import repro_claims as claims
-from experiments.repro_figures import EXPERIMENTS, PAPER
-from experiments.repro_runs import QUICK, Runs, convergence_iteration
-from experiments.reproduce import main, run
+from experiments.reproduce import claims
+from experiments.reproduce.figures import EXPERIMENTS, PAPER
+from experiments.reproduce.runs import QUICK, Runs, convergence_iteration
+from experiments.reproduce.harness import main, run
 
 # The built-in 39-bus study at two load levels: trained and tested at the first, the second
 # the generalisation set's (quick settings keep 2 fault buses and 1 duration of each set).

@@ -2,7 +2,7 @@
 
 Plain functions of plain dicts (an evaluate result: {"tasks": [{"fault_bus",
 "fault_duration", "fault_start", "operating_point", "reward", "shed_mw", "recovered"}]}; a
-trace of `repro_runs.Runs.trace`), so each claim can be checked on inputs whose answer is
+trace of `runs.Runs.trace`), so each claim can be checked on inputs whose answer is
 known by hand:
   - the share of test tasks on which PARS earns more than a baseline, and on which the
     difference passes a threshold (more than M over UVLS, less than M/2 against PPO; M the

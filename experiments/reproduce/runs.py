@@ -24,12 +24,12 @@ import numpy as np
 
 from ars.pars import ParsConfig, init_state
 from ars.train import TrainConfig, make_trainer
-from experiments.repro_claims import best_ppo_seed
+from experiments.reproduce.claims import best_ppo_seed
 from experiments.train import SMOOTHING, paper_preset, smoothed, train_study, widths
 from jaxgrid.rollouts import rollout_specs, training_problem
 from jaxgrid.study import Study, load_study, write_study
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 @dataclasses.dataclass(frozen=True)

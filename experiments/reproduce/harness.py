@@ -8,7 +8,7 @@
     python -m experiments.reproduce --study studies/ieee300_pnnl.toml --out results/pnnl300
     make reproduce
 
-Experiments (`experiments.repro_figures`): fig6a (linear / FNN / LSTM learning curves, mean ±
+Experiments (`experiments.reproduce.figures`): fig6a (linear / FNN / LSTM learning curves, mean ±
 std over seeds), fig6b (LSTM, N = 8/16/32/64), fig7 (speed-up over devices and processes),
 fig8 (39-bus case study, PARS vs UVLS), fig9 (LSTM, N = 32/64/128), fig10_11 (PARS vs PPO over
 wall time and environment steps), fig12 (per-task reward differences PARS − UVLS / MPC /
@@ -38,13 +38,13 @@ import sys
 import time
 from pathlib import Path
 
-from experiments.repro_figures import EXPERIMENTS, PAPER, NotApplicable
-from experiments.repro_runs import FULL, QUICK, Runs
+from experiments.reproduce.figures import EXPERIMENTS, PAPER, NotApplicable
+from experiments.reproduce.runs import FULL, QUICK, Runs
 
 
 def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides) -> dict:
     """Run the experiments `only` (default all) into `out`; write REPORT.md. `overrides`:
-    fields of `repro_runs.Settings`. Returns {id: result}."""
+    fields of `runs.Settings`. Returns {id: result}."""
     unknown = sorted(set(only or ()) - set(EXPERIMENTS))
     if unknown:
         raise ValueError(f"--only {','.join(unknown)}: unknown; the experiments are "
@@ -155,6 +155,3 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{Path(args.out) / 'REPORT.md'}")
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

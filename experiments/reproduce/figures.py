@@ -5,7 +5,7 @@ writes its figure `OUT/<id>.png`, and returns its numbers: {"numbers": {quantity
 "settings": what ran}. `PAPER` holds, per experiment, its title, the paper's case and
 settings, and the paper's values for the same quantities (from the paper's text, figures
 and tables; "≈" marks values read off a figure). The side claims are computed by
-`experiments.repro_claims`. `generalisation` is not in the paper: the main policy against
+`experiments.reproduce.claims`. `generalisation` is not in the paper: the main policy against
 UVLS on the operating points it never trained on (the study's "generalisation" task set).
 """
 from __future__ import annotations
@@ -13,8 +13,8 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from experiments import repro_claims as claims
-from experiments.repro_runs import Runs, convergence_iteration, metrics_rows
+from experiments.reproduce import claims
+from experiments.reproduce.runs import Runs, convergence_iteration, metrics_rows
 from experiments.train import smoothed
 
 PAPER = {
