@@ -25,10 +25,11 @@ from jaxgrid.dynamics import FAMILIES, derivatives, update_loads
 from jaxgrid.grid import DeviceGroup, GridModel, GridState
 from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
 from jaxgrid.models.acmotor import LOAD_MOTORS, MotorOptions
-from jaxgrid.models.base import LoadSite, ModelError, device_label
+from jaxgrid.models.base import (Initial, LoadSite, ModelError, Signals, StartPoint,
+                                 device_label)
 from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, run_model
 from jaxgrid.models.cmld_init import expand
-from jaxgrid.models.exciters import EXCITERS, ExciterPorts
+from jaxgrid.models.exciters import EXCITERS
 from jaxgrid.models.governors import GOVERNORS
 from jaxgrid.models.induction import INDUCTION_MOTORS
 from jaxgrid.models.loads import LoadSplit, split_bus_loads
@@ -131,41 +132,29 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     gen = case.generators
     on = gen.in_service & (case.buses.kind[gen.bus] != ISOLATED)
     keys, load_keys = _unit_keys(case)
-    groups = _machine_groups(case, records["machine"], keys, options.strict, notes)
-    order = np.array([u for _, units, _ in groups for u in units], dtype=int)
+    machines = _machine_groups(case, records["machine"], keys, options.strict, notes)
+    order = np.array([u for g in machines for u in g.units], dtype=int)
     position = {int(g): k for k, g in enumerate(order)}
+    pending = {"machines": machines,
+               "exciters": _controller_groups(case, records["exciter"], EXCITERS, keys, position),
+               "governors": _controller_groups(case, records["governor"], GOVERNORS, keys,
+                                               position),
+               "loads": _load_groups(records["load"], load_keys)}
 
     sbase = case.base_mva
     ratio = np.where(gen.mbase[order] > 0, gen.mbase[order], sbase) / sbase
     vt0 = v0[gen.bus[order]]
     i0 = np.conj((pf.pg[order] + 1j * pf.qg[order]) / ratio / vt0)  # machine base
-    with jax.enable_x64(True):
-        machines, m_states, efd0, pm0, xadifd = [], [], [], [], []
-        for model, units, params in groups:
-            k = [position[u] for u in units]
-            params, x, efd, pm = model.init(_jnp(params), jnp.asarray(vt0[k]), jnp.asarray(i0[k]))
-            i_dq = model.to_rotor(x, jnp.asarray(i0[k]))
-            xadifd.append(np.asarray(model.field_current(params, x, i_dq)))
-            machines.append(DeviceGroup(params=_np(params), model=model, index=tuple(k),
-                                        labels=_labels(case, model.name, units)))
-            m_states.append(_np(x))
-            efd0.append(np.asarray(efd))
-            pm0.append(np.asarray(pm))
-        efd0, pm0, xadifd = (np.concatenate(a) for a in (efd0, pm0, xadifd))
-        exciters, e_states = _controller_groups(
-            case, records["exciter"], EXCITERS, keys, position,
-            lambda model, p, k: model.init(p, jnp.asarray(efd0[k]), ExciterPorts(
-                ec=jnp.abs(jnp.asarray(vt0[k])), vt=jnp.asarray(vt0[k]), it=jnp.asarray(i0[k]),
-                xadifd=jnp.asarray(xadifd[k]), dw=jnp.zeros(len(k)))))
-        governors, g_states = _controller_groups(
-            case, records["governor"], GOVERNORS, keys, position,
-            lambda model, p, k: model.init(p, jnp.asarray(pm0[k])))
+    s_load = _bus_load_at(case, pf)
+    started, point = _start(pending, _start_point(case, pf, vt0, i0, s_load.real, options))
+    machines, m_states = _device_groups(started["machines"])
+    exciters, e_states = _device_groups(started["exciters"])
+    governors, g_states = _device_groups(started["governors"])
+    efd0, pm0 = (np.asarray(a) for a in (point.signals.efd, point.signals.pm))
 
     z_source = np.concatenate([g.params["ra"] + 1j * g.params["xs"] for g in machines])
     y_norton = ratio / z_source
-    s_load = _bus_load_at(case, pf)
-    motors = _load_model_groups(case, pf, s_load.real, records["load"], load_keys, options,
-                                notes)
+    motors = _load_units(case, started["loads"], s_load.real, notes)
     upstream = np.zeros(0, dtype=int)
     if composite:
         motors.append(LoadModelUnits(run_model(options.composite), grown.labels,
@@ -191,15 +180,15 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     load_groups = tuple(
         DeviceGroup(params=m.params, model=m.model, index=tuple(slot_of[int(b)] for b in m.buses),
                     labels=m.labels) for m in motors)
-    _report_model_notes(case, tuple(machines) + exciters + governors + load_groups, notes)
+    _report_model_notes(case, machines + exciters + governors + load_groups, notes)
 
     model = GridModel(
-        machines=tuple(machines), exciters=exciters, governors=governors, loads=load_groups,
+        machines=machines, exciters=exciters, governors=governors, loads=load_groups,
         network=network.build(y, slot_bus, np.complex128),
         z_source=z_source, y_norton=y_norton, mbase_ratio=ratio, efd0=efd0, pm0=pm0,
         load_y=y_z[load_bus], load_s_i=s_i[load_bus], load_s_p=s_p[load_bus],
         load_vm0=np.maximum(pf.vm[load_bus], 1e-6), load_p0=s_load[load_bus].real, v0=v0,
-        initial=GridState(machines=tuple(m_states), exciters=e_states, governors=g_states,
+        initial=GridState(machines=m_states, exciters=e_states, governors=g_states,
                           loads=tuple(m.states for m in motors),
                           load_flags=tuple(m.flags for m in motors),
                           load_left=np.ones(len(load_bus)), v=v0[slot_bus]),
@@ -362,8 +351,21 @@ def _labels(case: Case, name: str, units) -> tuple[str, ...]:
                  for u in units)
 
 
-def _machine_groups(case, records, keys, strict, notes):
-    """[(model, generator indices, CON params with ra, xs, zx)] in MACHINES order."""
+class Pending(NamedTuple):
+    """One group of units to start: its model, CON params (prepared), labels, the units
+    (generator or load-record indices in the case) and `index`, what `init_ports` picks
+    them by (machine positions; load-record indices)."""
+
+    model: type
+    params: dict
+    labels: tuple[str, ...]
+    units: tuple[int, ...]
+    index: tuple[int, ...]
+
+
+def _machine_groups(case, records, keys, strict, notes) -> list[Pending]:
+    """Machine groups in MACHINES order, CON params with ra, xs, zx; index = position in
+    that order."""
     gen = case.generators
     missing = sorted(set(keys.values()) - {keys[_key(r)] for r in records})
     if missing:
@@ -378,34 +380,93 @@ def _machine_groups(case, records, keys, strict, notes):
         rs = [r for r in records if r.model == name]
         if not rs:
             continue
-        units = [keys[_key(r)] for r in rs]
+        units = tuple(keys[_key(r)] for r in rs)
         p = model.read(rs)
-        p.update(ra=gen.zr[units], zx=gen.zx[units])
+        p.update(ra=gen.zr[list(units)], zx=gen.zx[list(units)])
         p["xs"] = np.asarray(model.source_reactance(p), dtype=float)
         for r, zx, xs in zip(rs, p["zx"], p["xs"]):
             if abs(zx - xs) > 1e-3:
                 notes.append(f"{r.source}:{r.line}: {name} at bus {r.bus}: ZSOURCE X = {zx:g} "
                              f"differs from the model's {xs:g}; the model's value is used")
-        groups.append((model, units, model.prepare(p)))
+        first = sum(len(g.units) for g in groups)
+        groups.append(Pending(model, model.prepare(p), _labels(case, name, units), units,
+                              tuple(range(first, first + len(units)))))
     if not groups:
         raise ModelError(f"{case.source}: no machine has a supported dynamic model")
     return groups
 
 
-def _controller_groups(case, records, registry, keys, position, init):
-    """Exciter or governor groups attached to modelled machines, with initial states."""
-    groups, states = [], []
+def _controller_groups(case, records, registry, keys, position) -> list[Pending]:
+    """Exciter or governor groups attached to modelled machines; index = their machines'
+    positions."""
+    groups = []
     for name, model in registry.items():
         rs = [r for r in records if r.model == name and keys[_key(r)] in position]
-        if not rs:
-            continue
-        units = [keys[_key(r)] for r in rs]
-        k = [position[u] for u in units]
-        params, x = init(model, _jnp(model.prepare(model.read(rs))), k)
-        groups.append(DeviceGroup(params=_np(params), model=model, index=tuple(k),
-                                  labels=_labels(case, name, units)))
-        states.append(_np(x))
-    return tuple(groups), tuple(states)
+        if rs:
+            units = tuple(keys[_key(r)] for r in rs)
+            groups.append(Pending(model, model.prepare(model.read(rs)),
+                                  _labels(case, name, units), units,
+                                  tuple(position[u] for u in units)))
+    return groups
+
+
+def _load_groups(records, load_keys) -> list[Pending]:
+    """Load-model groups in LOAD_MODELS order; index = their load records."""
+    groups = []
+    for name, model in LOAD_MODELS.items():
+        rs = [r for r in records if r.model == name]
+        if rs:
+            units = tuple(load_keys[_key(r)] for r in rs)
+            groups.append(Pending(model, model.prepare(model.read(rs)),
+                                  tuple(device_label(r) for r in rs), units, units))
+    return groups
+
+
+def _start_point(case, pf, vt0, i0, bus_p, options) -> StartPoint:
+    """The power-flow point: machine terminal voltages vt0 and currents i0 (n_gen,) complex
+    (MBASE), every load record's site; bus_p (n_bus,) the load drawn at each bus, p.u."""
+    loads = case.loads
+    vm = pf.vm[loads.bus]
+    record_s = (loads.p_power + 1j * loads.q_power
+                + (loads.p_current + 1j * loads.q_current) * vm
+                + (loads.p_impedance + 1j * loads.q_impedance) * vm ** 2)
+    site = LoadSite(v0=vm * np.exp(1j * pf.va[loads.bus]), record_s=record_s,
+                    bus_p=bus_p[loads.bus], sbase=case.base_mva, f_nom=case.frequency_hz,
+                    motors=options.motors, composite=options.composite)
+    with jax.enable_x64(True):
+        zero = jnp.zeros(len(vt0))
+        signals = Signals(vt=jnp.asarray(vt0), current=jnp.asarray(i0),
+                          i_dq=jnp.zeros(len(vt0), complex), xadifd=zero, dw=zero, efd=zero,
+                          pm=zero, v_load=jnp.zeros(0, complex),
+                          omega_b=float(2 * np.pi * case.frequency_hz))
+    return StartPoint(signals=signals, site=site)
+
+
+def _start(pending: dict[str, list[Pending]],
+           point: StartPoint) -> tuple[dict[str, list[tuple[Pending, Initial]]], StartPoint]:
+    """Every family's groups initialised (float64) in FAMILIES order, machines -> exciters
+    -> governors -> loads (spec §0): each group reads its init ports from the point, and the
+    `Signals` fields in its output (the machines' EFD0, Pm0, XadIfd0) are written back for
+    the families after it. Returns {family: [(group, Initial)]} and the final point."""
+    started = {}
+    with jax.enable_x64(True):
+        for family in FAMILIES:
+            started[family] = []
+            for g in pending[family]:
+                k = np.asarray(g.index, dtype=int)
+                start = g.model.init(_jnp(g.params), g.model.init_ports(point, k, g.labels))
+                signals = {name: getattr(point.signals, name).at[k].set(value)
+                           for name, value in start.output.items() if name in Signals._fields}
+                point = point._replace(signals=point.signals._replace(**signals))
+                started[family].append((g, start))
+    return started, point
+
+
+def _device_groups(started) -> tuple[tuple[DeviceGroup, ...], tuple[dict, ...]]:
+    """(groups, initial states) of started machines, exciters or governors."""
+    return (tuple(DeviceGroup(params=_np(s.params), model=g.model, index=g.index,
+                              labels=g.labels) for g, s in started),
+            tuple(_np(s.states) for _, s in started))
 
 
 # --------------------------------------------------------------------------- #
@@ -439,29 +500,15 @@ class LoadModelUnits(NamedTuple):
     s0: np.ndarray  # complex power each unit draws at the power flow, p.u. system base
 
 
-def _load_model_groups(case, pf, bus_p, records, load_keys, options,
-                       notes) -> list[LoadModelUnits]:
-    """The units of each load model in use; bus_p (n_bus,) is the load drawn at the power
-    flow, p.u. system base."""
-    loads = case.loads
-    vm = pf.vm[loads.bus]
-    record_p = loads.p_power + loads.p_current * vm + loads.p_impedance * vm ** 2
+def _load_units(case, started, bus_p, notes) -> list[LoadModelUnits]:
+    """The started load-model groups as units at their buses, their load report in notes;
+    bus_p (n_bus,) is the load drawn at the power flow, p.u. system base."""
     groups = []
-    for name, model in LOAD_MODELS.items():
-        rs = [r for r in records if r.model == name]
-        if not rs:
-            continue
-        units = np.array([load_keys[_key(r)] for r in rs])
-        buses = loads.bus[units]
-        labels = tuple(device_label(r) for r in rs)
-        site = LoadSite(v0=pf.vm[buses] * np.exp(1j * pf.va[buses]), record_p=record_p[units],
-                        bus_p=bus_p[buses], sbase=case.base_mva, f_nom=case.frequency_hz,
-                        labels=labels)
-        with jax.enable_x64(True):
-            p, x, z, s0, report = model.init(model.read(rs), site, options.motors)
-        notes.extend(f"load report: {line}" for line in report)
-        groups.append(LoadModelUnits(model, labels, buses, _np(p), _np(x), _np(z),
-                                     np.asarray(s0)))
+    for g, start in started:
+        notes.extend(f"load report: {line}" for line in start.report)
+        groups.append(LoadModelUnits(g.model, g.labels, case.loads.bus[list(g.units)],
+                                     _np(start.params), _np(start.states), _np(start.flags),
+                                     np.asarray(start.output["s0"])))
     drawn = np.zeros(case.n_bus)
     for g in groups:
         np.add.at(drawn, g.buses, g.s0.real)

@@ -235,9 +235,10 @@ def test_motor_d_is_acmtblu1(tmp_path):
     (tmp_path / "d.dyr").write_text(f"2 'USRLOD' '1' 'ACMTBLU1' 12 1 0 35 9 29 16 "
                                     f"{' '.join(map(str, d_cons))} /\n")
     pd = Acmtblu1.read(read_dyr(tmp_path / "d.dyr").records)
-    pd, _, zd, sd, _ = Acmtblu1.init(pd, LoadSite(v0=np.array([v_l]), record_p=np.array([p_l]),
-                                                  bus_p=np.array([p_l]), sbase=SBASE,
-                                                  f_nom=F_NOM), MotorOptions())
+    pd, _, out, zd, _ = Acmtblu1.init(pd, LoadSite(
+        v0=np.array([v_l]), record_s=np.array([p_l]), bus_p=np.array([p_l]), sbase=SBASE,
+        f_nom=F_NOM, motors=MotorOptions()))
+    sd = out["s0"]
     assert init.s0[0] == pytest.approx(sd[0], abs=1e-12), "the unit is motor D alone"
     # stall below Vstall 0.45, contactors 0.5/0.4, restart of part B above Vrst 0.95
     volts = profile(v_l, (1.0, 0.02), (0.42, 0.1), (0.8, 0.3), (1.0, 0.6))
@@ -270,9 +271,10 @@ def test_motors_a_to_c_are_cim5bl(tmp_path, m):
     text = " ".join(repr(float(v)) for v in values)
     (tmp_path / "c.dyr").write_text(f"2 'CIM5BL' '1' 1 {text} /\n")
     pc = Cim5bl.read(read_dyr(tmp_path / "c.dyr").records)
-    pc, xc, zc, sc, _ = Cim5bl.init(pc, LoadSite(v0=np.array([v_l]), record_p=np.array([p_l]),
-                                                 bus_p=np.array([p_l]), sbase=SBASE,
-                                                 f_nom=F_NOM), MotorOptions())
+    pc, xc, out, zc, _ = Cim5bl.init(pc, LoadSite(
+        v0=np.array([v_l]), record_s=np.array([p_l]), bus_p=np.array([p_l]), sbase=SBASE,
+        f_nom=F_NOM, motors=MotorOptions()))
+    sc = out["s0"]
     assert init.s0[0] == pytest.approx(sc[0], abs=1e-10), "same P and Q at V_L"
     volts = profile(v_l, (1.0, 0.02), (0.6, 0.15), (1.0, 0.3))
     ours = heun(Cmldblu2, p, init.states, init.flags, volts)

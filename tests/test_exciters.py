@@ -17,7 +17,7 @@ import pytest
 from conftest import SHARED_CASES, andes_cases_dir
 from jaxgrid.io.dyr import DyrRecord, read_dyr
 from jaxgrid.models.base import ModelError
-from jaxgrid.models.exciters import EXCITERS, ExciterPorts
+from jaxgrid.models.exciters import EXCITERS, ExciterPorts, ExciterStart
 
 # init and dynamics evaluate the same float64 expressions; what remains is round-off on
 # derivatives of order KA·u/TA ~ 1e3 p.u./s.
@@ -82,7 +82,7 @@ def start(model, records, efd0, ec0=1.0):
     n = len(records)
     efd0 = jnp.broadcast_to(jnp.asarray(efd0, dtype=jnp.float64), (n,))
     inp = inputs(jnp.full((n,), ec0), efd0)
-    p, x = model.init(p, efd0, inp)
+    p, x, *_ = model.init(p, ExciterStart(efd0, inp))
     return p, x, inp
 
 
@@ -115,7 +115,7 @@ def test_equilibrium(name, tmp_path):
         efd0 = jnp.linspace(1.5, 2.2, n)  # above 2.38 one ACTIVSg2000 IEEET1 cannot hold EFD0
         p = model.prepare(model.read(records))
         inp = inputs(jnp.linspace(0.98, 1.04, n), efd0)
-        p, x = model.init(p, efd0, inp)
+        p, x, *_ = model.init(p, ExciterStart(efd0, inp))
         assert set(x) == set(model.states), f"{name}: init states {sorted(x)}"
         violations = {k: int(np.sum(v)) for k, v in model.init_violations(p, x).items()}
         assert not any(violations.values()), f"{name}: limits violated at t = 0: {violations}"

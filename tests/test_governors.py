@@ -22,8 +22,8 @@ import pytest
 from conftest import SHARED_CASES, andes_cases_dir
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.models.base import ModelError
-from jaxgrid.models.governors import (GOVERNORS, Gast, GovernorPorts, Hygov, Ieeeg1, Ieesgo,
-                                      Tgov1)
+from jaxgrid.models.governors import (GOVERNORS, Gast, GovernorPorts, GovernorStart, Hygov,
+                                      Ieeeg1, Ieesgo, Tgov1)
 
 IEEE39_DYR = SHARED_CASES / "ieee39" / "IEEE39bus_3AC.dyr"
 ACTIVSG_DYR = SHARED_CASES / "activsg2000" / "ACTIVSg2000_dyn_acmotor_zone3_v1.dyr"
@@ -102,7 +102,7 @@ def test_init_is_steady(records, name, source, bypass):
         p = with_bypassed_half(model, p)
     n = len(recs) * (2 if bypass else 1)
     pm0 = jnp.linspace(0.5, 0.8, n)  # inside every unit's limits in these files
-    p, x = model.init(p, pm0)
+    p, x, *_ = model.init(p, GovernorStart(pm0))
     assert set(x) == set(model.states), f"{name}: init states {sorted(x)} != {model.states}"
     bad = {k: np.flatnonzero(v) for k, v in model.init_violations(p, x).items() if np.any(v)}
     assert not bad, f"{name} ({source}): init outside limits {bad}"
@@ -116,7 +116,7 @@ def test_init_is_steady(records, name, source, bypass):
 def test_dynamics_jit_and_gradient(records, name, source):
     model = GOVERNORS[name]
     p = with_bypassed_half(model, params(model, records[source][name]))
-    p, x = model.init(p, jnp.full(len(p[model.cons[0].name]), 0.7))
+    p, x, *_ = model.init(p, GovernorStart(jnp.full(len(p[model.cons[0].name]), 0.7)))
     total_pm = jax.jit(lambda p, x, dw: jnp.sum(model.rates(p, x, GovernorPorts(dw))[0]))
     dw = jnp.full(x[model.states[0]].shape, -0.002)
     grads = jax.grad(total_pm, argnums=(0, 1, 2))(p, x, dw)
@@ -127,17 +127,17 @@ def test_dynamics_jit_and_gradient(records, name, source):
 def test_gast_init_above_at_is_flagged(records):
     # 39-bus GAST: AT = 0.9; VMAX raised to 1.2 so that only the load limit is violated.
     p = params(Gast, records["ieee39"]["GAST"], vmax=1.2)
-    p, x = Gast.init(p, jnp.array([0.95]))
+    p, x, *_ = Gast.init(p, GovernorStart(jnp.array([0.95])))
     flags = {k: bool(v[0]) for k, v in Gast.init_violations(p, x).items()}
     assert flags == {"x1": False, "x3": True}, flags
 
 
 def test_ieeeg1_and_hygov_init_violations(records):
     p = params(Ieeeg1, records["ieee39"]["IEEEG1"][:1])  # PMIN = 0.4, K1 + K3 + K5 + K7 = 1
-    p, x = Ieeeg1.init(p, jnp.array([0.3]))
+    p, x, *_ = Ieeeg1.init(p, GovernorStart(jnp.array([0.3])))
     assert bool(Ieeeg1.init_violations(p, x)["pgv"][0]), "Pgv0 = 0.3 < PMIN = 0.4 not flagged"
     p = params(Hygov, records["activsg"]["HYGOV"][:1])  # GMAX = 1
-    p, x = Hygov.init(p, jnp.array([2.0]))  # q0 = 2/At + qNL > 1
+    p, x, *_ = Hygov.init(p, GovernorStart(jnp.array([2.0])))  # q0 = 2/At + qNL > 1
     assert bool(Hygov.init_violations(p, x)["g"][0]), "g0 > GMAX not flagged"
 
 
@@ -159,7 +159,7 @@ def test_tgov1_droop_settles(records):
     # state x1 = x2 = (Pref − Δω)/R = Pm0 − Δω/R, so Pm = Pm0 − Δω/R − Dt·Δω.
     p = params(Tgov1, records["kundur"]["TGOV1"], dt=0.5)
     pm0, dw = 0.7, 0.001
-    p, x = Tgov1.init(p, jnp.full(4, pm0))
+    p, x, *_ = Tgov1.init(p, GovernorStart(jnp.full(4, pm0)))
     x = simulate(Tgov1, p, x, dw, t_end=200.0, dt=0.01)  # 28 T3: transient < 1e-12
     pm, _ = Tgov1.rates(p, x, GovernorPorts(jnp.full(4, dw)))
     expected = pm0 - dw / 0.05 - 0.5 * dw
@@ -170,7 +170,7 @@ def test_tgov1_vmax_is_non_windup(records):
     # Underspeed Δω = −0.05 asks x1 → Pm0 + 1; VMAX = 0.9 stops it exactly there. Back at
     # Δω = 0 the valve leaves VMAX at once (a windup state would stay above it).
     p = params(Tgov1, records["kundur"]["TGOV1"][:1], vmax=0.9)
-    p, x = Tgov1.init(p, jnp.array([0.7]))
+    p, x, *_ = Tgov1.init(p, GovernorStart(jnp.array([0.7])))
     x = simulate(Tgov1, p, x, -0.05, t_end=5.0, dt=0.01)
     assert float(x["x1"][0]) == 0.9, x["x1"]
     _, dx = Tgov1.rates(p, x, GovernorPorts(jnp.array([-0.05])))
@@ -184,7 +184,7 @@ def test_ieeeg1_valve_rate_limits(records):
     # Valve speed (P0 − K·Δω − Pgv)/T3 = ∓2 p.u./s at the step, clipped to Uc or Uo; it stays
     # clipped while the gap exceeds Uo·T3 = 0.01 (opening) or |Uc|·T3 = 0.05 (closing).
     p = params(Ieeeg1, records["ieee39"]["IEEEG1"][:1])
-    p, x0 = Ieeeg1.init(p, jnp.array([0.5]))
+    p, x0, *_ = Ieeeg1.init(p, GovernorStart(jnp.array([0.5])))
     _, dx = Ieeeg1.rates(p, x0, GovernorPorts(jnp.array([-0.01])))
     assert float(dx["pgv"][0]) == 0.1, "opening rate is not Uo"
     _, dx = Ieeeg1.rates(p, x0, GovernorPorts(jnp.array([0.01])))
@@ -202,7 +202,7 @@ def test_ieeeg1_valve_rate_limits(records):
 def test_ieeeg1_bypassed_turbine_follows_valve(records):
     # T4..T7 = 0: every stage passes its input, so Pm = (K1 + K3 + K5 + K7)·Pgv at once.
     p = params(Ieeeg1, records["ieee39"]["IEEEG1"][:1], t4=0, t5=0, t6=0, t7=0)
-    p, x = Ieeeg1.init(p, jnp.array([0.6]))
+    p, x, *_ = Ieeeg1.init(p, GovernorStart(jnp.array([0.6])))
     x = dict(x, pgv=jnp.array([0.65]))
     pm, dx = Ieeeg1.rates(p, x, GovernorPorts(jnp.array([0.0])))
     assert float(pm[0]) == pytest.approx(0.65, abs=1e-15)
@@ -213,7 +213,7 @@ def test_ieesgo_static_gain_and_lead(records):
     # 39-bus IEESGO: K1 = 14.3, PMIN = 0.5. Steady state: y5 = K2·y4, y6 = K3·y5, so
     # Pm = y4 = Pgv = P0 − K1·Δω (inside [PMIN, PMAX]).
     p = params(Ieesgo, records["ieee39"]["IEESGO"])
-    p, x = Ieesgo.init(p, jnp.full(2, 0.8))
+    p, x, *_ = Ieesgo.init(p, GovernorStart(jnp.full(2, 0.8)))
     x = simulate(Ieesgo, p, x, 0.001, t_end=60.0, dt=0.002)  # slowest T5 = 3 s
     pm, _ = Ieesgo.rates(p, x, GovernorPorts(jnp.full(2, 0.001)))
     assert np.allclose(pm, 0.8 - 14.3 * 0.001, rtol=0, atol=SETTLED_TOL), pm
@@ -221,7 +221,7 @@ def test_ieesgo_static_gain_and_lead(records):
     # step gives K1·(T2/T3)·Δω at once; with T1 = T3 = 0 the filter is the static gain K1.
     p = params(Ieesgo, records["ieee39"]["IEESGO"], t1=0, t2=1.0, t3=[0.5, 0.0],
                t4=0, t5=0, t6=0)
-    p, x = Ieesgo.init(p, jnp.full(2, 0.8))
+    p, x, *_ = Ieesgo.init(p, GovernorStart(jnp.full(2, 0.8)))
     pm, _ = Ieesgo.rates(p, x, GovernorPorts(jnp.full(2, 0.001)))
     assert np.allclose(pm, [0.8 - 14.3 * 2 * 0.001, 0.8 - 14.3 * 0.001], rtol=0, atol=1e-14), pm
 
@@ -230,7 +230,7 @@ def test_gast_load_limit(records):
     # 39-bus GAST: R = 0.05, AT = 0.9, KT = 2 (VMAX raised to 1.2). Underspeed Δω = −0.01
     # demands Pm0 + 0.2 = 1.0; the limit AT + KT·(AT − x3) = x3 settles at x3 = AT.
     p = params(Gast, records["ieee39"]["GAST"], vmax=1.2)
-    p, x = Gast.init(p, jnp.array([0.8]))
+    p, x, *_ = Gast.init(p, GovernorStart(jnp.array([0.8])))
     x = simulate(Gast, p, x, -0.01, t_end=60.0, dt=0.002)
     pm, _ = Gast.rates(p, x, GovernorPorts(jnp.array([-0.01])))
     assert float(pm[0]) == pytest.approx(0.9, abs=SETTLED_TOL)
@@ -242,7 +242,7 @@ def test_hygov_droop_settles(records):
     recs = records["activsg"]["HYGOV"][:3]
     p = params(Hygov, recs, dturb=0.5)
     pm0, dw = 0.6, 0.0005
-    p, x = Hygov.init(p, jnp.full(3, pm0))
+    p, x, *_ = Hygov.init(p, GovernorStart(jnp.full(3, pm0)))
     x = simulate(Hygov, p, x, dw, t_end=2000.0, dt=0.01)  # slowest mode r·Tr/R ≈ 74 s
     pm, _ = Hygov.rates(p, x, GovernorPorts(jnp.full(3, dw)))
     g = p["nref"] / p["r"] - dw / p["r"]
@@ -255,7 +255,7 @@ def test_hygov_velm_and_gate_limits(records):
     # A large filtered error asks the integrator for x1/(r·Tr) >> VELM: it moves at VELM,
     # and not at all once at GMAX.
     p = params(Hygov, records["activsg"]["HYGOV"][:1])
-    p, x = Hygov.init(p, jnp.array([0.5]))
+    p, x, *_ = Hygov.init(p, GovernorStart(jnp.array([0.5])))
     _, dx = Hygov.rates(p, dict(x, x1=jnp.array([1.0])), GovernorPorts(jnp.array([0.0])))
     assert float(dx["xi"][0]) == float(p["velm"][0]), dx["xi"]
     _, dx = Hygov.rates(p, dict(x, x1=jnp.array([-1.0])), GovernorPorts(jnp.array([0.0])))

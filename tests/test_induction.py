@@ -70,15 +70,16 @@ def records(tmp_path: Path, lines: list[str], name: str = "m.dyr"):
 
 def site(recs, v0=V0, record_p=RECORD_P) -> LoadSite:
     n = len(recs)
-    return LoadSite(v0=np.full(n, v0, dtype=complex), record_p=np.full(n, record_p),
+    return LoadSite(v0=np.full(n, v0, dtype=complex), record_s=np.full(n, record_p),
                     bus_p=np.full(n, record_p), sbase=SBASE, f_nom=F_NOM,
-                    labels=tuple(device_label(r) for r in recs))
+                    labels=tuple(device_label(r) for r in recs), motors=DEFAULT)
 
 
 def initialised(model, recs, options=DEFAULT, **site_args):
     """(p, x, z, s0, notes, site) with p, x, z as jnp arrays."""
-    where = site(recs, **site_args)
-    p, x, z, s0, notes = model.init(model.read(recs), where, options)
+    where = site(recs, **site_args)._replace(motors=options)
+    p, x, out, z, notes = model.init(model.read(recs), where)
+    s0 = out["s0"]
     to_jnp = lambda d: {k: jnp.asarray(v) for k, v in d.items()}  # noqa: E731
     return to_jnp(p), to_jnp(x), to_jnp(z), s0, notes, where
 
@@ -237,7 +238,7 @@ def test_motor_that_cannot_carry_its_load(tmp_path, record_p, v0, message):
     pmult = "0.3" if record_p == 1.0 else "1.3"  # Sm = 30 MVA for a 100 MW load: p = 3.3
     recs = records(tmp_path, [f"CIM5BL {_with(DOUBLE, pmult=pmult)} {CIM5_TAIL}"])
     with pytest.raises(ModelError, match=re.escape(f"m.dyr:2: CIM5BL at bus 1 id '1': {message}")):
-        Cim5bl.init(Cim5bl.read(recs), site(recs, v0=v0, record_p=record_p), DEFAULT)
+        Cim5bl.init(Cim5bl.read(recs), site(recs, v0=v0, record_p=record_p))
 
 
 def test_partial_saturation_data_is_reported(tmp_path):
@@ -415,9 +416,10 @@ def _ours_against(model, cons: dict, ref):
     t, v, slip, p_ref, q_ref, pf, _ = ref
     p = {k: np.array([float(val)]) for k, val in cons.items()}
     p["it"] = np.array([1.0])
-    where = LoadSite(v0=v[:1], record_p=np.array([pf["p"]]), bus_p=np.array([pf["p"]]),
-                     sbase=SBASE, f_nom=F_NOM)
-    p, x, z, s0, _ = model.init(p, where, KEEP_ALL)
+    where = LoadSite(v0=v[:1], record_s=np.array([pf["p"]]), bus_p=np.array([pf["p"]]),
+                     sbase=SBASE, f_nom=F_NOM, motors=KEEP_ALL)
+    p, x, out, z, _ = model.init(p, where)
+    s0 = out["s0"]
     to_jnp = lambda d: {k: jnp.asarray(val) for k, val in d.items()}  # noqa: E731
     our_slip, s = follow(model, to_jnp(p), to_jnp(x), to_jnp(z), t, v)
     return ({"slip": np.abs(our_slip - slip).max(), "p": np.abs(s.real - p_ref).max(),

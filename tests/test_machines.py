@@ -10,7 +10,7 @@ import pytest
 
 from jaxgrid.io.dyr import DyrRecord, read_dyr
 from jaxgrid.models.base import ModelError, quadratic_saturation, quadratic_saturation_constants
-from jaxgrid.models.machines import MACHINES, MachinePorts
+from jaxgrid.models.machines import MACHINES, MachinePorts, MachineStart
 from tests.conftest import SHARED_CASES, andes_cases_dir
 
 V0 = 1.02 * np.exp(0.2j)   # terminal voltage, p.u.
@@ -44,7 +44,8 @@ def _initialised(name, records):
     p["xs"] = np.asarray(model.source_reactance(p), dtype=float)
     p = {k: jnp.asarray(v) for k, v in model.prepare(p).items()}
     v0, i0 = jnp.full(n, V0), jnp.full(n, I0)
-    p, x, efd0, pm0 = model.init(p, v0, i0)
+    p, x, out, *_ = model.init(p, MachineStart(v0, i0))
+    efd0, pm0 = out["efd"], out["pm"]
     return model, p, x, efd0, pm0, v0, i0
 
 

@@ -45,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid import vecmath
-from jaxgrid.models.base import (Array, Con, LoadModel, LoadSite, Params, States,
+from jaxgrid.models.base import (Array, Con, Initial, LoadModel, LoadSite, Params, States,
                                  surrogate_gradient, timer_fires)
 
 VX_FLOOR = 0.3  # p.u.: lowest stall-jump voltage (spec §7 guard)
@@ -166,7 +166,9 @@ class Acmtblu1(LoadModel):
     # ------------------------------------------------------------------ #
 
     @classmethod
-    def init(cls, p: Params, site: LoadSite, options: MotorOptions):
+    def init(cls, p: Params, site: LoadSite) -> Initial:
+        """At site, with the readings site.motors (share mode, Vx rule, curve offsets)."""
+        options = site.motors
         p = {k: np.asarray(v, dtype=float) for k, v in p.items()}
         notes = []
         raw_lf = p["complf"]
@@ -216,7 +218,7 @@ class Acmtblu1(LoadModel):
             if v0[k] < vstall[k]:
                 notes.append(f"{site.label(k)}: V0 = {v0[k]:.4f} p.u. is below Vstall' = {vstall[k]:.4f}: the "
                              "motor stalls after Tstall")
-        return p, {}, z, s_motor * sm, notes
+        return Initial(p, {}, {"s0": s_motor * sm}, z, tuple(notes))
 
     # ------------------------------------------------------------------ #
     # Network injection and per-step logic (jnp)

@@ -12,19 +12,27 @@ model-wide `Signals` of one evaluation, `rates(p, x, ports) -> (output, dx)` giv
 state derivatives and the signal it drives (`output` names the `Signals` field: EFD for
 exciters, Pm for governors; None for machines and loads). `jaxgrid.dynamics.derivatives`
 runs the families in causal order, each reading the signals the earlier ones wrote.
+Initialisation mirrors it: `init_ports(point, k, labels)` picks what the units start from
+out of the model-wide `StartPoint` (the power flow), `init(p, ports) -> Initial` gives
+their parameters, states and what they hand on; `jaxgrid.compile` runs the families in
+the order machines -> exciters -> governors -> loads (spec §0).
 """
 from __future__ import annotations
 
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import ClassVar, NamedTuple
+from typing import TYPE_CHECKING, ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
+
+if TYPE_CHECKING:  # the load models' readings (modules that import this one)
+    from jaxgrid.models.acmotor import MotorOptions
+    from jaxgrid.models.cmld import CompositeOptions
 
 INF = math.inf
 LIMIT_TOL = 1e-6  # p.u.: initial values computed in float64 sit on a limit to round-off
@@ -96,6 +104,81 @@ class Signals(NamedTuple):
     omega_b: float
 
 
+class LoadSite(NamedTuple):
+    """Where load models sit, from the power flow (NumPy, float64, arrays (n_unit,)), and
+    the readings of their data.
+
+    Attributes:
+      v0: complex bus voltage, p.u.
+      record_s: complex power of the unit's RAW load record at |v0|, p.u. system base.
+      bus_p: active power of all loads at the bus at |v0|, p.u. system base.
+      sbase: system base, MVA.  f_nom: nominal frequency, Hz.
+      labels: "MODEL at bus B id 'I'" per unit, for the load report (optional).
+      motors: readings of motor-load data (ACMTBLU1, CIM5BL/CIM6BL, composite loads).
+      composite: readings of composite-load data (CMLDBLU1/2).
+    """
+
+    v0: np.ndarray
+    record_s: np.ndarray
+    bus_p: np.ndarray
+    sbase: float
+    f_nom: float
+    labels: tuple[str, ...] = ()
+    motors: MotorOptions | None = None
+    composite: CompositeOptions | None = None
+
+    @property
+    def record_p(self) -> np.ndarray:
+        """Active power of the unit's RAW load record at |v0|, p.u. system base."""
+        return np.real(self.record_s)
+
+    def label(self, k: int) -> str:
+        """How the load report names unit k."""
+        return self.labels[k] if self.labels else f"unit {k}"
+
+    def pick(self, k, labels: tuple[str, ...]) -> LoadSite:
+        """The site of units k (indices into this site's units), named by labels."""
+        return self._replace(v0=self.v0[k], record_s=self.record_s[k], bus_p=self.bus_p[k],
+                             labels=labels)
+
+
+class StartPoint(NamedTuple):
+    """The power-flow point every device starts from, model-wide (float64): a family's
+    `init_ports` picks its units' init ports from it, as `ports` picks from `Signals`.
+
+    Attributes:
+      signals: `Signals` at t = 0: the machines' terminal voltages and currents of the
+        power flow and dw = 0; efd, pm and xadifd as the machines' `init` set them (0
+        before); i_dq 0 (unused); v_load empty (load slots are chosen after the load
+        models start).
+      site: `LoadSite` of every load record of the case (n_record,), without labels.
+    """
+
+    signals: Signals
+    site: LoadSite
+
+
+class Initial(NamedTuple):
+    """What `DeviceModel.init` gives its units, arrays (n,).
+
+    Attributes:
+      params: p with what initialisation derives (set-points, Norton admittances, ...).
+      states: {state: (n,)} at rest.
+      output: what the units hand on: machines {efd, pm, xadifd} (`Signals` fields the
+        later families start from), load models {s0: complex power drawn at the power flow,
+        p.u. system base}; empty for exciters and governors.
+      flags: {flag: (n,)} discrete states (load models; empty elsewhere).
+      report: load-report lines naming the unit (load models; one per unit and per
+        substituted CON value).
+    """
+
+    params: Params
+    states: States
+    output: dict[str, Array]
+    flags: States = {}
+    report: tuple[str, ...] = ()
+
+
 def outside_limits(x: Array, lo: Array, hi: Array) -> Array:
     """True where x lies outside [lo − LIMIT_TOL, hi + LIMIT_TOL] (NaN counts as outside):
     the one rule for an initial value outside its limits."""
@@ -120,6 +203,17 @@ class DeviceModel:
     def ports(cls, signals: Signals, k: Array, flags: States) -> NamedTuple:
         """What the units at machine or load-slot indices k (n,) read from `signals`;
         flags: their discrete states (empty outside load models)."""
+        raise NotImplementedError
+
+    @classmethod
+    def init_ports(cls, point: StartPoint, k: Array, labels: tuple[str, ...]) -> NamedTuple:
+        """What the units at machine or load-record indices k (n,), named by labels, start
+        from at the power-flow point."""
+        raise NotImplementedError
+
+    @classmethod
+    def init(cls, p: Params, ports: NamedTuple) -> Initial:
+        """Parameters, states at rest and what the units hand on, from their init ports."""
         raise NotImplementedError
 
     @classmethod
@@ -281,29 +375,6 @@ class LoadPorts(NamedTuple):
     flags: States
 
 
-class LoadSite(NamedTuple):
-    """Where a load model sits, from the power flow (NumPy, float64, arrays (n_unit,)).
-
-    Attributes:
-      v0: complex bus voltage, p.u.
-      record_p: active power of the unit's RAW load record at |v0|, p.u. system base.
-      bus_p: active power of all loads at the bus at |v0|, p.u. system base.
-      sbase: system base, MVA.  f_nom: nominal frequency, Hz.
-      labels: "MODEL at bus B id 'I'" per unit, for the load report (optional).
-    """
-
-    v0: np.ndarray
-    record_p: np.ndarray
-    bus_p: np.ndarray
-    sbase: float
-    f_nom: float
-    labels: tuple[str, ...] = ()
-
-    def label(self, k: int) -> str:
-        """How the load report names unit k."""
-        return self.labels[k] if self.labels else f"unit {k}"
-
-
 class LoadModel(DeviceModel):
     """A dynamic load attached to one RAW load record (bus, LID), one row per unit.
 
@@ -322,13 +393,15 @@ class LoadModel(DeviceModel):
         return LoadPorts(v=signals.v_load[k], flags=flags)
 
     @classmethod
-    def init(cls, p: Params, site: LoadSite, options) -> tuple[Params, States, States, Array, list]:
-        """(p with y_norton and derived constants, states, flags, s0, notes) at the power flow.
+    def init_ports(cls, point: StartPoint, k: Array, labels: tuple[str, ...]) -> LoadSite:
+        return point.site.pick(k, labels)
 
-        s0: (n,) complex power the units draw at site.v0, p.u. system base (the rest of the
-        bus load stays static). notes: the load report, lines naming the unit by site.label(k)
-        (one per unit, one per substitution of a CON value).
-        """
+    @classmethod
+    def init(cls, p: Params, site: LoadSite) -> Initial:
+        """p with y_norton and derived constants, states, flags, output {s0} and the load
+        report at site. s0: (n,) complex power the units draw at site.v0, p.u. system base
+        (the rest of the bus load stays static); report lines name the unit by
+        site.label(k)."""
         raise NotImplementedError
 
     @classmethod

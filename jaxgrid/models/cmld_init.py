@@ -212,7 +212,8 @@ def _motor_d_params(p: dict) -> dict:
 def _components(p, share, consts, vmag, p_load, sbase, f_nom, motors, labels):
     """Per component, complex power (n,) drawn at |V_L| = vmag for load-bus P = p_load.
 
-    Returns ({"a".."d", "el", "st": S, p.u. system base}, motor-D init, slips {a, b, c}).
+    Returns ({"a".."d", "el", "st": S, p.u. system base}, motor D's `Initial`, slips {a, b,
+    c}).
     The static load takes up any difference of motor D's P from its share (curve_offsets).
     """
     out, slips = {}, {}
@@ -224,13 +225,13 @@ def _components(p, share, consts, vmag, p_load, sbase, f_nom, motors, labels):
         z = steady_state(consts[m], s0, vmag)[2]
         out[m] = share[m] * p_load / p[f"lfm{m}"] * vmag ** 2 / np.conj(z)
         slips[m] = s0
-    site = LoadSite(v0=vmag.astype(complex), record_p=share["d"] * p_load, bus_p=p_load,
-                    sbase=sbase, f_nom=f_nom, labels=tuple(f"{lb} motor D" for lb in labels))
-    d = Acmtblu1.init(_motor_d_params(p), site, dataclasses.replace(
-        motors, share_mode="psse_load_record"))
-    out["d"] = d[3]
+    site = LoadSite(v0=vmag.astype(complex), record_s=share["d"] * p_load, bus_p=p_load,
+                    sbase=sbase, f_nom=f_nom, labels=tuple(f"{lb} motor D" for lb in labels),
+                    motors=dataclasses.replace(motors, share_mode="psse_load_record"))
+    d = Acmtblu1.init(_motor_d_params(p), site)
+    out["d"] = d.output["s0"]
     out["el"] = share["el"] * p_load * (1.0 + 1j * _tan(p["pfel"]))
-    p_st = share["st"] * p_load + (share["d"] * p_load - d[3].real)
+    p_st = share["st"] * p_load + (share["d"] * p_load - out["d"].real)
     out["st"] = p_st + 1j * share["st"] * p_load * _tan(p["pfs"])
     return out, d, slips
 
@@ -312,9 +313,9 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
                      f"{options.v_floor:g}")
 
     vmag = np.abs(v_l)
-    comp, (pd, _, zd, s_d, d_notes), slips = _components(
-        p, share, consts, vmag, p_l, sbase, f_nom, motors, labels)
-    notes.extend(d_notes)
+    comp, d, slips = _components(p, share, consts, vmag, p_l, sbase, f_nom, motors, labels)
+    pd, zd, s_d = d.params, d.flags, d.output["s0"]
+    notes.extend(d.report)
     if options.compensation == "static_q":  # the static load's Q closes the balance
         comp["st"] = comp["st"] + 1j * (s_l.imag - sum(comp.values()).imag)
     params, states = dict(p), {}

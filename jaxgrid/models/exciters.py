@@ -18,10 +18,10 @@ from typing import ClassVar, NamedTuple
 
 import jax.numpy as jnp
 
-from jaxgrid.models.base import (Array, Con, DeviceModel, Params, Signals, States,
-                                 freeze_at_limits, lag, lead_lag_output, outside_limits,
-                                 quadratic_saturation, quadratic_saturation_constants, safe,
-                                 saturation_problem)
+from jaxgrid.models.base import (Array, Con, DeviceModel, Initial, Params, Signals,
+                                 StartPoint, States, freeze_at_limits, lag, lead_lag_output,
+                                 outside_limits, quadratic_saturation,
+                                 quadratic_saturation_constants, safe, saturation_problem)
 
 _TR = Con("tr", "s", "voltage transducer time constant (0: bypassed)", 0.0)
 _KA = Con("ka", "p.u.", "regulator gain", 0.0, positive=True)
@@ -84,6 +84,14 @@ class ExciterPorts(NamedTuple):
     dw: Array
 
 
+class ExciterStart(NamedTuple):
+    """What an exciter starts from: the field voltage efd (n,) p.u. it holds at rest and
+    its ports at the power flow (dw = 0)."""
+
+    efd: Array
+    ports: ExciterPorts
+
+
 class ExciterModel(DeviceModel):
     """An excitation-system family; `p` holds the CONs and, after `init`, `vref` (p.u.).
     Its rates drive the machine's field voltage EFD (p.u.)."""
@@ -96,8 +104,12 @@ class ExciterModel(DeviceModel):
                             xadifd=signals.xadifd[k], dw=signals.dw[k])
 
     @classmethod
-    def init(cls, p: Params, efd0: Array, inp: ExciterPorts) -> tuple[Params, States]:
-        """(params with `vref`, states) holding EFD = efd0 (p.u., (n,)) at equilibrium."""
+    def init_ports(cls, point: StartPoint, k: Array, labels) -> ExciterStart:
+        return ExciterStart(efd=point.signals.efd[k], ports=cls.ports(point.signals, k, {}))
+
+    @classmethod
+    def init(cls, p: Params, start: ExciterStart) -> Initial:
+        """Params with `vref` and states holding EFD = start.efd at equilibrium (no output)."""
         raise NotImplementedError
 
     @classmethod
@@ -165,10 +177,11 @@ class Ieeet1(ExciterModel):
         return p["ke"] * efd + sat
 
     @classmethod
-    def init(cls, p, efd0, inp):
+    def init(cls, p, start):
+        efd0, ec = start.efd, start.ports.ec
         vr0 = cls.field_effort(p, efd0)
-        x = {"vm": inp.ec, "vr": vr0, "efd": efd0, "xf": efd0}
-        return dict(p, vref=inp.ec + vr0 / p["ka"]), x
+        x = {"vm": ec, "vr": vr0, "efd": efd0, "xf": efd0}
+        return Initial(dict(p, vref=ec + vr0 / p["ka"]), x, {})
 
     @classmethod
     def rates(cls, p, x, inp):
@@ -206,9 +219,9 @@ class Ieeex1(Ieeet1):
                 {"xll": lag(x["xll"], u, p["tb"])})
 
     @classmethod
-    def init(cls, p, efd0, inp):
-        p, x = super().init(p, efd0, inp)
-        return p, {"xll": x["vr"] / p["ka"]} | x
+    def init(cls, p, start):
+        p, x, out, *_ = super().init(p, start)
+        return Initial(p, {"xll": x["vr"] / p["ka"]} | x, out)
 
 
 class Exdc1(Ieeex1):
@@ -271,9 +284,10 @@ class Sexs(ExciterModel):
         return {"efd": (p["emin"], p["emax"])}
 
     @classmethod
-    def init(cls, p, efd0, inp):
+    def init(cls, p, start):
+        efd0 = start.efd
         u0 = efd0 / p["k"]
-        return dict(p, vref=inp.ec + u0), {"xll": u0, "efd": efd0}
+        return Initial(dict(p, vref=start.ports.ec + u0), {"xll": u0, "efd": efd0}, {})
 
     @classmethod
     def rates(cls, p, x, inp):
@@ -333,12 +347,13 @@ class Esst3a(ExciterModel):
         return jnp.minimum(ve * fex, p["vbmax"])
 
     @classmethod
-    def init(cls, p, efd0, inp):
+    def init(cls, p, start):
+        efd0, inp = start
         vm_inner = efd0 / cls.exciter_voltage(p, inp)  # inf/NaN where VB0 = 0: a violation
         vr0 = vm_inner / p["km"] + jnp.minimum(p["kg"] * efd0, p["vgmax"])
         vi0 = vr0 / p["ka"]
         x = {"vm": inp.ec, "xll": vi0, "vr": vr0, "vm_inner": vm_inner}
-        return dict(p, vref=inp.ec + vi0), x
+        return Initial(dict(p, vref=inp.ec + vi0), x, {})
 
     @classmethod
     def rates(cls, p, x, inp):
@@ -395,10 +410,12 @@ class Exst1(ExciterModel):
         return inp.ec * p["vrmin"], inp.ec * p["vrmax"] - p["kc"] * inp.xadifd
 
     @classmethod
-    def init(cls, p, efd0, inp):
+    def init(cls, p, start):
+        efd0, inp = start
         vi0 = efd0 / p["ka"]
         x = {"vm": inp.ec, "xll": vi0, "vr": efd0, "xf": efd0}
-        return dict(p, vref=inp.ec + vi0, efd_max0=cls.output_bounds(p, inp)[1]), x
+        p = dict(p, vref=inp.ec + vi0, efd_max0=cls.output_bounds(p, inp)[1])
+        return Initial(p, x, {})
 
     @classmethod
     def rates(cls, p, x, inp):

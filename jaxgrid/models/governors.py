@@ -18,9 +18,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
-from jaxgrid.models.base import (Array, Con, DeviceModel, ModelError, Params, Signals, States,
-                                 device_label, freeze_at_limits, lag, lead_lag_output,
-                                 outside_limits)
+from jaxgrid.models.base import (Array, Con, DeviceModel, Initial, ModelError, Params, Signals,
+                                 StartPoint, States, device_label, freeze_at_limits, lag,
+                                 lead_lag_output, outside_limits)
 
 # Smallest gate opening used in the HYGOV head h = (q/g)², p.u.: a closed gate with
 # flow is unphysical; the floor keeps h finite (and differentiable) if the gate closes.
@@ -53,6 +53,13 @@ class GovernorPorts(NamedTuple):
     dw: Array
 
 
+class GovernorStart(NamedTuple):
+    """What a governor starts from: pm, the mechanical power (n,) p.u. MBASE it holds at
+    rest."""
+
+    pm: Array
+
+
 class GovernorModel(DeviceModel):
     """A turbine-governor family: Pm (p.u. MBASE) from the speed deviation Δω (p.u.).
 
@@ -67,8 +74,13 @@ class GovernorModel(DeviceModel):
         return GovernorPorts(dw=signals.dw[k])
 
     @classmethod
-    def init(cls, p: Params, pm0) -> tuple[Params, States]:
-        """(params with the reference added, initial states) for a steady state at Pm0 (p.u.)."""
+    def init_ports(cls, point: StartPoint, k: Array, labels) -> GovernorStart:
+        return GovernorStart(pm=point.signals.pm[k])
+
+    @classmethod
+    def init(cls, p: Params, start: GovernorStart) -> Initial:
+        """Params with the reference added and states for a steady state at start.pm (no
+        output)."""
         raise NotImplementedError
 
     @classmethod
@@ -105,9 +117,9 @@ class Tgov1(_ValveLimited):
     states = ("x1", "x2")
 
     @classmethod
-    def init(cls, p, pm0):
-        pm0 = jnp.asarray(pm0, dtype=float)
-        return dict(p, pref=p["r"] * pm0), {"x1": pm0, "x2": pm0}
+    def init(cls, p, start):
+        pm0 = jnp.asarray(start.pm, dtype=float)
+        return Initial(dict(p, pref=p["r"] * pm0), {"x1": pm0, "x2": pm0}, {})
 
     @classmethod
     def rates(cls, p, x, ports):
@@ -180,11 +192,11 @@ class Ieeeg1(GovernorModel):
         return out
 
     @classmethod
-    def init(cls, p, pm0):
-        pgv0 = jnp.asarray(pm0, dtype=float) / p["k_hp"]
+    def init(cls, p, start):
+        pgv0 = jnp.asarray(start.pm, dtype=float) / p["k_hp"]
         x = {"x_ll": jnp.zeros_like(pgv0), "pgv": pgv0,
              "y4": pgv0, "y5": pgv0, "y6": pgv0, "y7": pgv0}
-        return dict(p, p0=pgv0), x
+        return Initial(dict(p, p0=pgv0), x, {})
 
     @classmethod
     def rates(cls, p, x, ports):
@@ -222,9 +234,9 @@ class Gast(_ValveLimited):
     states = ("x1", "x2", "x3")
 
     @classmethod
-    def init(cls, p, pm0):
-        pm0 = jnp.asarray(pm0, dtype=float)
-        return dict(p, lref=pm0), {"x1": pm0, "x2": pm0, "x3": pm0}
+    def init(cls, p, start):
+        pm0 = jnp.asarray(start.pm, dtype=float)
+        return Initial(dict(p, lref=pm0), {"x1": pm0, "x2": pm0, "x3": pm0}, {})
 
     @classmethod
     def rates(cls, p, x, ports):
@@ -279,12 +291,12 @@ class Ieesgo(GovernorModel):
                     t_lag=np.where(t1_used, p["t3"], 0.0))
 
     @classmethod
-    def init(cls, p, pm0):
-        pm0 = jnp.asarray(pm0, dtype=float)
+    def init(cls, p, start):
+        pm0 = jnp.asarray(start.pm, dtype=float)
         zero = jnp.zeros_like(pm0)
         x = {"x_ll": zero, "x_lag": zero, "y4": pm0, "y5": p["k2"] * pm0,
              "y6": p["k3"] * p["k2"] * pm0}
-        return dict(p, p0=pm0), x
+        return Initial(dict(p, p0=pm0), x, {})
 
     @classmethod
     def rates(cls, p, x, ports):
@@ -341,10 +353,10 @@ class Hygov(GovernorModel):
         return None
 
     @classmethod
-    def init(cls, p, pm0):
-        q0 = jnp.asarray(pm0, dtype=float) / p["at"] + p["qnl"]
+    def init(cls, p, start):
+        q0 = jnp.asarray(start.pm, dtype=float) / p["at"] + p["qnl"]
         x = {"x1": jnp.zeros_like(q0), "xi": q0, "g": q0, "q": q0}
-        return dict(p, nref=p["r"] * q0), x
+        return Initial(dict(p, nref=p["r"] * q0), x, {})
 
     @classmethod
     def rates(cls, p, x, ports):

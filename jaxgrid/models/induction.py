@@ -49,7 +49,7 @@ import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
 from jaxgrid.models.acmotor import MotorOptions
-from jaxgrid.models.base import (Array, Con, LoadModel, LoadPorts, LoadSite, ModelError,
+from jaxgrid.models.base import (Array, Con, Initial, LoadModel, LoadPorts, LoadSite, ModelError,
                                  Params, States,
                                  device_label, quadratic_saturation,
                                  quadratic_saturation_constants, safe, saturation_problem,
@@ -166,14 +166,15 @@ class Cim5bl(LoadModel):
     # ------------------------------------------------------------------ #
 
     @classmethod
-    def init(cls, p: Params, site: LoadSite, options=None):
-        """(params, states, flags, s0, notes) at the power flow (spec §2, §5).
+    def init(cls, p: Params, site: LoadSite) -> Initial:
+        """Params, states, flags, output {s0} and load report at the power flow (spec §2, §5).
 
         The whole load record is the motor: it draws P = site.record_p at site.v0 and the
-        Q of its equivalent circuit. options.stiff_below (s): see the module docstring.
-        Raises ModelError naming the unit when the motor cannot carry its load at V0.
+        Q of its equivalent circuit. site.motors.stiff_below (s; None: MotorOptions()): see
+        the module docstring. Raises ModelError naming the unit when the motor cannot carry
+        its load at V0.
         """
-        stiff_below = (options or MotorOptions()).stiff_below
+        stiff_below = (site.motors or MotorOptions()).stiff_below
         p = {k: np.asarray(v, dtype=float) for k, v in p.items()}
         n = p["ra"].shape[0]
         v0 = np.asarray(site.v0, dtype=complex)
@@ -216,7 +217,7 @@ class Cim5bl(LoadModel):
         s_drawn = sm * v0 * np.conj(i0)
         notes = _report(cls.name, p, site, sm, s0, s_drawn, dropped, c, full, s_full, sat_on)
         notes += [f"{site.label(k)}: {text}" for k, text in torque_notes]
-        return p_out, x, flags, s_drawn, notes
+        return Initial(p_out, x, {"s0": s_drawn}, flags, tuple(notes))
 
     # ------------------------------------------------------------------ #
     # Run time (jnp, elementwise over units)

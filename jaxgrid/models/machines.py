@@ -21,8 +21,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.models.base import (Array, Con, DeviceModel, Params, Signals, States,
-                                 quadratic_saturation, quadratic_saturation_constants,
+from jaxgrid.models.base import (Array, Con, DeviceModel, Initial, Params, Signals, StartPoint,
+                                 States, quadratic_saturation, quadratic_saturation_constants,
                                  saturation_problem)
 from jaxgrid.vecmath import power, sincos
 
@@ -73,6 +73,18 @@ class MachinePorts(NamedTuple):
     omega_b: float
 
 
+class MachineStart(NamedTuple):
+    """What a machine starts from at the power flow, arrays (n,).
+
+    Attributes:
+      vt: terminal voltage, network frame, complex p.u.
+      it: current injected into the bus, network frame, complex p.u. MBASE.
+    """
+
+    vt: Array
+    it: Array
+
+
 class MachineModel(DeviceModel):
     """A synchronous machine family. `p` also holds `ra`, `xs` (Norton impedance) and `mbase`."""
 
@@ -87,8 +99,21 @@ class MachineModel(DeviceModel):
         raise NotImplementedError
 
     @classmethod
-    def init(cls, p: Params, v0, i0) -> tuple[Params, States, jnp.ndarray, jnp.ndarray]:
-        """(params, states, EFD0, Pm0) from terminal voltage v0 and injected current i0 (MBASE)."""
+    def init_ports(cls, point: StartPoint, k: Array, labels) -> MachineStart:
+        return MachineStart(vt=point.signals.vt[k], it=point.signals.current[k])
+
+    @classmethod
+    def init(cls, p: Params, ports: MachineStart) -> Initial:
+        """Params and states at rest; output the EFD0, Pm0 (p.u. MBASE) and XadIfd0 that
+        exciters and governors start from."""
+        p, x, efd0, pm0 = cls.operating_point(p, ports.vt, ports.it)
+        xadifd = cls.field_current(p, x, cls.to_rotor(x, ports.it))
+        return Initial(p, x, {"efd": efd0, "pm": pm0, "xadifd": xadifd})
+
+    @classmethod
+    def operating_point(cls, p: Params, v0, i0) -> tuple[Params, States, Array, Array]:
+        """(params, states, EFD0, Pm0) from terminal voltage v0 and injected current i0
+        (MBASE), complex (n,)."""
         raise NotImplementedError
 
     @classmethod
@@ -135,7 +160,7 @@ class Gencls(MachineModel):
         return p["zx"]
 
     @classmethod
-    def init(cls, p, v0, i0):
+    def operating_point(cls, p, v0, i0):
         e0 = v0 + (p["ra"] + 1j * p["xs"]) * i0
         p = dict(p, e_mag=jnp.abs(e0))
         x = {"delta": jnp.angle(e0), "dw": jnp.zeros_like(p["h"])}
@@ -224,7 +249,7 @@ class Genrou(MachineModel):
         return psi_q + 1j * psi_d
 
     @classmethod
-    def init(cls, p, v0, i0):
+    def operating_point(cls, p, v0, i0):
         psi0 = v0 + (p["ra"] + 1j * p["xs"]) * i0
         se0 = cls.saturation(jnp.abs(psi0), p["sat_a"], p["sat_b"])
         delta = jnp.angle((1 + p["gamma"] * se0) * psi0 + 1j * (p["xq"] - p["xppd"]) * i0)
@@ -292,7 +317,7 @@ class Gensal(Genrou):
         return p["k3d"] * x["eq1"] + p["k4d"] * x["psikd"], x["psiq2"]
 
     @classmethod
-    def init(cls, p, v0, i0):
+    def operating_point(cls, p, v0, i0):
         psi0 = v0 + (p["ra"] + 1j * p["xs"]) * i0
         delta = jnp.angle(v0 + (p["ra"] + 1j * p["xq"]) * i0)
         rot = jnp.conj(to_network_frame(delta))
