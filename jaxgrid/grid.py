@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from flax import struct
 
+from jaxgrid.busnames import resolve_bus
 from jaxgrid.network import Network
 
 
@@ -144,16 +145,11 @@ class GridModel:
 
     def bus_number_by_name(self, name: str) -> int:
         """Bus number of a name (case-insensitive): an entry of `bus_names` such as
-        "Bus20_loadBus", or "Bus<N>" for any bus number N of the model; ValueError if none."""
-        key = name.strip().lower()
-        for bus_name, number in zip(self.bus_names, self.bus_numbers):
-            if bus_name.lower() == key:
-                return number
-        head, digits = key[:3], key[3:]
-        if head == "bus" and digits.lstrip("-").isdigit() and int(digits) in self.bus_numbers:
-            return int(digits)
-        raise ValueError(f"bus name {name!r} is not in the model (names are 'Bus<N>' and the "
-                         "composite loads' 'Bus<N>_loadBus' / 'Bus<N>_lowBus')")
+        "Bus20_loadBus", or "Bus<N>" for any bus number N of the model
+        (`jaxgrid.busnames.resolve_bus`); ValueError if none."""
+        names = {bus_name.lower(): number
+                 for bus_name, number in zip(self.bus_names, self.bus_numbers)}
+        return resolve_bus(name, names, self.bus_numbers, "the model")
 
     def bus_index_by_name(self, name: str) -> int:
         """Index (into bus_numbers, trajectories' bus axis) of a bus name; see

@@ -3,8 +3,9 @@
 Each builder returns a `StudyCase`: a `Case`, its dynamic records (a `DyrData` built here, source
 "jaxgrid.cases.<name>", line = record index), the buses the load-shedding task observes and acts
 on, the motor buses, the integration step, the operating point, the study's reward values and
-its train and test fault sets (`jaxgrid.study.builtin` makes a `Study` of them). Everything is built by this
-module from public data (MATPOWER networks as shipped by PYPOWER, textbook machine data, the
+its train and test fault sets: the input of a built-in study, which
+`jaxgrid.study.sources.builtin_source` turns into the study's defaults (`jaxgrid.study.builtin`
+makes a `Study` of them). Everything is built by this module from public data (MATPOWER networks as shipped by PYPOWER, textbook machine data, the
 ACMTBLU1 specification); the PNNL PARS study files were read for facts (bus numbers, which load
 carries a motor, typical parameter values), nothing is read from them.
 

@@ -5,7 +5,7 @@ observationWeight, actionScopeAry, faultBusCandidates) into a `PnnlTask`;
 `read_sim_config(path)` reads a dynamic-simulation configuration (simuTimeStepSec,
 totalSimuTimeSec, ...) into a `PnnlSimConfig`. Bus references stay as written ("Bus504",
 "bus20001", "Bus20_loadBus"): the study resolves them against its grid
-(`jaxgrid.study`), which names the file, key and value of one that is missing.
+(`jaxgrid.study.sources`), which names the file, key and value of one that is missing.
 
 Every key of the files under ../shared/cases is read and either used or reported in
 `notes` with the reason it changes nothing here; a key this module does not know is
@@ -79,7 +79,8 @@ _ACSC_USED = {"type", "category", "zLG"}
 
 @dataclasses.dataclass(frozen=True)
 class PnnlTask:
-    """A PNNL load-shedding task configuration, bus references as written.
+    """A PNNL load-shedding task configuration, bus references as written: the input of a
+    study from files, turned into its defaults by `jaxgrid.study.sources.file_source`.
 
     Attributes:
       source: the file.  name: environmentName.

@@ -1,0 +1,205 @@
+"""The values a study is: its definition (what rebuilds it, what a study file holds) and
+the built `Study` (module docstring of `jaxgrid.study`).
+
+`StudyDefinition` is the one definition of a study: `GridSource` (where the operating points
+come from), `CompileSettings`, the environment's `EnvConfig` and `EnvParams`, named
+`TaskSet`s and `TrainingSettings`. `Study` holds it with the operating points and their
+compiled models stacked (`jaxgrid.study.build`).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+
+from jaxgrid.case import Case
+from jaxgrid.checks import InputError, Range, check_each
+from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.grid import GridModel
+from jaxgrid.models.acmotor import MotorOptions
+from jaxgrid.models.cmld import CompositeOptions
+from jaxgrid.models.loads import LoadSplit
+from jaxgrid.powerflow import PowerFlowResult
+from jaxgrid.study.names import BusTable
+from jaxgrid.tasks import PointTask, TaskSet, TaskSpec, task_batch
+
+
+class StudyWarning(UserWarning):
+    """A study input that is read but changes nothing, or a check that does not match."""
+
+
+@dataclasses.dataclass(frozen=True)
+class GridSource:
+    """Where the operating points come from: a built-in case or files (absolute paths).
+
+    Attributes:
+      builtin: a `jaxgrid.cases` FIDVR study case name, or None.
+      load_levels: the built-in's operating points (factor on loads and dispatch).
+      raw: RAW files, one per operating point.  dyr: the DYR file.
+      task_config, sim_config: PNNL task and simulation JSON files, or None.
+    """
+
+    builtin: str | None = None
+    load_levels: tuple[float, ...] = (1.0,)
+    raw: tuple[str, ...] = ()
+    dyr: str | None = None
+    task_config: str | None = None
+    sim_config: str | None = None
+
+    def __post_init__(self):
+        if not self.load_levels:
+            raise InputError("load_levels", None, " is empty: give at least one load level")
+        check_each("load_levels", self.load_levels, LOAD_LEVEL)
+
+
+LOAD_LEVEL = Range(0.0, 10.0, "(factor on loads and dispatch)", lo_open=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class CompileSettings:
+    """How every operating point is compiled (`jaxgrid.compile.CompileOptions`; the action
+    buses become the load slots). sweeps None: the source's (a built-in study's measured
+    value, `jaxgrid.study.sources.FILE_SWEEPS` for files); a built study's definition holds
+    the value used."""
+
+    strict: bool = True
+    precision: str = "float32"
+    sweeps: int | None = None
+    motors: MotorOptions = MotorOptions()
+    loads: LoadSplit = LoadSplit()
+    composite: CompositeOptions = CompositeOptions()
+
+
+POLICY_KINDS = ("linear", "fnn", "lstm")
+# The PARS study's inputs per policy kind: 10 stacked observations for linear and FNN
+# policies, the current one for the LSTM (it remembers the rest); built-in studies train so.
+PAPER_HISTORY = {"linear": 10, "fnn": 10, "lstm": 1}
+TASK_SAMPLINGS = ("uniform", "stratified")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainingSettings:
+    """How the study's policies train where the study fixes it (`experiments.train` takes
+    these as its flag defaults).
+
+    Attributes:
+      history: {policy kind: observations stacked}; a kind not named stacks env.history.
+      task_sampling: "uniform" (m distinct tasks) or "stratified"
+        (`jaxgrid.rollouts.stratified_sampler`).
+    """
+
+    history: dict = dataclasses.field(default_factory=dict)
+    task_sampling: str = "uniform"
+
+    def __post_init__(self):
+        bad = {k: v for k, v in self.history.items()
+               if k not in POLICY_KINDS or isinstance(v, bool) or not isinstance(v, int)
+               or v < 1}
+        if bad:
+            raise ValueError(f"training.history {bad}: keys from {list(POLICY_KINDS)}, values "
+                             "ints >= 1")
+        if self.task_sampling not in TASK_SAMPLINGS:
+            raise ValueError(f"training.task_sampling = {self.task_sampling!r}: allowed "
+                             f"{list(TASK_SAMPLINGS)}")
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyDefinition:
+    """Everything that rebuilds a study (what `write_study` saves).
+
+    Attributes:
+      name: the study's name.  grid: its sources.  compile: compile settings.
+      env: the environment's structure.  params: reward and action values.
+      tasks: named task sets ("train", "test", ...).  training: TrainingSettings.
+    """
+
+    name: str
+    grid: GridSource
+    compile: CompileSettings
+    env: EnvConfig
+    params: EnvParams
+    tasks: dict
+    training: TrainingSettings = TrainingSettings()
+
+
+@dataclasses.dataclass(frozen=True)
+class OperatingPoint:
+    """One solved case of the study's grid.
+
+    Attributes:
+      label: short name ("load100", a RAW file's stem).  source: where it came from.
+      case: the network.  power_flow: its solution, the compiled model's initial point.
+      notes: what the compiler reported for it (load report, ...).
+    """
+
+    label: str
+    source: str
+    case: Case
+    power_flow: PowerFlowResult
+    notes: tuple[str, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    """A load-shedding study (`jaxgrid.study`).
+
+    Attributes:
+      definition: what rebuilds it.  points: the operating points.
+      models: the compiled points stacked, every array leaf with a leading (n_points,) axis.
+      buses: the names study files can use for its buses
+        (`jaxgrid.study.names.bus_number`).
+      notes: what the readers and checks reported (unused keys, count mismatches, ...).
+    """
+
+    definition: StudyDefinition
+    points: tuple[OperatingPoint, ...]
+    models: GridModel
+    buses: BusTable
+    notes: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        return self.definition.name
+
+    @property
+    def config(self) -> EnvConfig:
+        return self.definition.env
+
+    @property
+    def params(self) -> EnvParams:
+        return self.definition.params
+
+    @property
+    def n_points(self) -> int:
+        return len(self.points)
+
+    @property
+    def base_mva(self) -> float:
+        return self.points[0].case.base_mva
+
+    def point(self, index: int) -> GridModel:
+        """The compiled model of operating point `index` (host arrays)."""
+        return jax.tree.map(lambda a: a[index], self.models)
+
+    def history(self, policy_kind: str) -> int:
+        """Observations a `policy_kind` policy stacks in this study's training."""
+        return self.definition.training.history.get(policy_kind, self.config.history)
+
+    def env(self, **config) -> LoadSheddingEnv:
+        """The environment; `config` overrides EnvConfig fields, e.g. episode=6.0 (s)."""
+        return LoadSheddingEnv(self.point(0), dataclasses.replace(self.config, **config))
+
+    def task_set(self, name: str) -> TaskSet:
+        """The named task set; ValueError listing the study's sets."""
+        if name not in self.definition.tasks:
+            raise ValueError(f"study {self.name!r} has no task set {name!r}; it has "
+                             f"{', '.join(sorted(self.definition.tasks)) or 'none'}")
+        return self.definition.tasks[name]
+
+    def tasks(self, name: str) -> list[TaskSpec]:
+        """The specs of the named task set (every operating point × fault × duration)."""
+        return self.task_set(name).specs(self.n_points)
+
+    def batch(self, specs) -> PointTask:
+        """Stacked PointTask of specs (any operating points of this study)."""
+        return task_batch(self.point(0), specs)

@@ -1,0 +1,177 @@
+"""Study files: a study read from TOML (`read_study`) and its resolved definition written
+back (`write_study`); `load_study` takes a built-in study's name or a study file.
+
+The file format is in the module docstring of `jaxgrid.study`. Values are checked against
+the annotated field types of the definition's dataclasses; errors name the file, key and
+value.
+"""
+from __future__ import annotations
+
+import dataclasses
+import glob
+import re
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from jaxgrid import cases
+from jaxgrid.env import EnvConfig, EnvParams
+from jaxgrid.models.acmotor import MotorOptions
+from jaxgrid.models.cmld import CompositeOptions
+from jaxgrid.models.loads import LoadSplit
+from jaxgrid.simulate import Bounds
+from jaxgrid.study.build import build, builtin, renamed_errors
+from jaxgrid.study.definition import (CompileSettings, GridSource, Study, StudyDefinition,
+                                      TrainingSettings)
+from jaxgrid.tasks import TaskSet
+
+
+def load_study(spec: str) -> Study:
+    """A built-in study by name, or a study TOML file."""
+    if spec in cases.names():
+        return builtin(spec)
+    if spec.endswith(".toml") or Path(spec).is_file():
+        return read_study(spec)
+    studies = [n for n in cases.names() if n.endswith("_fidvr")]
+    raise ValueError(f"study {spec!r}: neither a built-in study ({', '.join(studies)}) nor a "
+                     "study file (.toml)")
+
+
+_SECTIONS = {"name", "grid", "compile", "env", "params", "tasks", "training"}
+
+
+def read_study(path: str | Path) -> Study:
+    """A study from its TOML file (format: `jaxgrid.study`); errors name the file, key and
+    value."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise ValueError(f"{path}: cannot read a study file: {err}") from None
+    unknown = sorted(set(data) - _SECTIONS)
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {unknown}; allowed: {sorted(_SECTIONS)}")
+    base = path.parent
+    grid = dict(_table(data.get("grid", {}), path, "grid"))
+    for key in ("dyr", "task_config", "sim_config"):
+        if key in grid:
+            grid[key] = str(_path(base, grid[key], path, f"grid.{key}"))
+    if "raw" in grid:
+        raws = [grid["raw"]] if isinstance(grid["raw"], str) else grid["raw"]
+        grid["raw"] = [str(p) for r in raws for p in _paths(base, r, path)]
+    with renamed_errors(lambda key: f"{path}: grid.{key}"):
+        source = _typed(GridSource, grid, path, "grid")
+    compile_settings = _typed(CompileSettings, data.get("compile", {}), path, "compile")
+    env = _fields(EnvConfig, data.get("env", {}), path, "env")
+    params = _fields(EnvParams, data.get("params", {}), path, "params")
+    tasks = {name: _fields(TaskSet, values, path, f"tasks.{name}")
+             for name, values in _table(data.get("tasks", {}), path, "tasks").items()}
+    training = _fields(TrainingSettings, data.get("training", {}), path, "training")
+    name = data.get("name")
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"{path}: name = {name!r}: must be a string")
+    return build(source, name=name, compile=compile_settings, env=env, params=params,
+                 tasks=tasks, training=training, origin=str(path))
+
+
+def write_study(study: Study | StudyDefinition, path: str | Path) -> None:
+    """Write the resolved definition as TOML (every field explicit, paths absolute)."""
+    definition = study.definition if isinstance(study, Study) else study
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(tomli_w.dumps(_plain(definition)))
+
+
+def _plain(value):
+    """Dataclasses and tuples as TOML-able dicts and lists; None fields left out."""
+    if dataclasses.is_dataclass(value):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)
+                if getattr(value, f.name) is not None}
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (tuple, list)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _table(value, path, key) -> dict:
+    if not isinstance(value, dict):
+        raise ValueError(f"{path}: {key} = {value!r}: must be a table")
+    return value
+
+
+_NESTED = {"MotorOptions": MotorOptions, "LoadSplit": LoadSplit, "Bounds": Bounds,
+           "CompositeOptions": CompositeOptions}
+
+
+def _fields(cls, values, path, key) -> dict:
+    """{field: value} checked against the fields of dataclass `cls` and their types."""
+    values = _table(values, path, key)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        raise ValueError(f"{path}: [{key}] unknown keys {unknown}; allowed: {sorted(fields)}")
+    return {name: _coerce(v, fields[name].type, path, f"{key}.{name}")
+            for name, v in values.items()}
+
+
+def _typed(cls, values, path, key):
+    return cls(**_fields(cls, values, path, key))
+
+
+def _coerce(value, annotation: str, path, key):
+    """value as the annotated type (str annotations: float, int, bool, str, tuple[X, ...],
+    the nested option dataclasses, and `X | None`)."""
+    base = annotation.removesuffix(" | None")
+    kind = "a table of ints" if base == "dict" else re.sub(
+        r"tuple\[(\w+), \.\.\.\]", r"a list of \1", base)
+    bad = ValueError(f"{path}: {key} = {value!r}: must be {kind}")
+    if base in _NESTED:
+        return _typed(_NESTED[base], value, path, key)
+    if base == "dict":  # a table of ints (training.history)
+        if not isinstance(value, dict):
+            raise bad
+        return {k: _coerce(v, "int", path, f"{key}.{k}") for k, v in value.items()}
+    if base.startswith("tuple["):
+        if not isinstance(value, list):
+            raise bad
+        item = base[len("tuple["):].split(",")[0]
+        return tuple(_coerce(v, item, path, key) for v in value)
+    if base == "bool":
+        if not isinstance(value, bool):
+            raise bad
+        return value
+    if base in ("int", "float"):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+                base == "int" and not isinstance(value, int)):
+            raise bad
+        return float(value) if base == "float" else value
+    if base == "str":
+        if not isinstance(value, str):
+            raise bad
+        return value
+    raise ValueError(f"{path}: {key}: no reader for type {annotation}")
+
+
+def _path(base: Path, value, path, key) -> Path:
+    if not isinstance(value, str):
+        raise ValueError(f"{path}: {key} = {value!r}: must be a path")
+    out = (base / value).resolve()
+    if not out.is_file():
+        raise ValueError(f"{path}: {key} = {value!r}: no such file ({out})")
+    return out
+
+
+def _paths(base: Path, pattern, path) -> list[Path]:
+    """RAW files of one entry of grid.raw: a path or a glob pattern (sorted)."""
+    if not isinstance(pattern, str):
+        raise ValueError(f"{path}: grid.raw entry {pattern!r}: must be a path or pattern")
+    if not glob.has_magic(pattern):
+        return [_path(base, pattern, path, "grid.raw")]
+    found = sorted(Path(p).resolve() for p in glob.glob(str(base / pattern)))
+    if not found:
+        raise ValueError(f"{path}: grid.raw pattern {pattern!r} matches no file")
+    return found
