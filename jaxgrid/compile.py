@@ -24,17 +24,17 @@ from jaxgrid.case import ISOLATED, PQ, Case
 from jaxgrid.dynamics import FAMILIES, derivatives, update_loads
 from jaxgrid.grid import DeviceGroup, GridModel, GridState
 from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
-from jaxgrid.models.acmotor import LOAD_MOTORS, MotorOptions
+from jaxgrid.models.acmotor import LOAD_MOTORS
 from jaxgrid.models.base import (Initial, LoadSite, ModelError, Signals, StartPoint,
                                  device_label)
-from jaxgrid.models.cmld import (COMPOSITE_LOADS, CompositeOptions, composite_records,
-                                 read_records, run_model)
+from jaxgrid.models.cmld import COMPOSITE_LOADS, composite_records, read_records, run_model
 from jaxgrid.models.cmld_init import expand
 from jaxgrid.models.exciters import EXCITERS
 from jaxgrid.models.governors import GOVERNORS
 from jaxgrid.models.induction import INDUCTION_MOTORS
 from jaxgrid.models.loads import LoadSplit, split_bus_loads
 from jaxgrid.models.machines import MACHINES
+from jaxgrid.models.options import CompositeOptions, MotorOptions
 from jaxgrid.powerflow import PowerFlowResult, admittance_matrix, bus_loads, solve
 
 LOAD_MODELS = {**LOAD_MOTORS, **INDUCTION_MOTORS}

@@ -33,11 +33,11 @@ from jaxgrid.compile import CompileOptions, InitWarning, compile_model
 from jaxgrid.dynamics import derivatives, load_injection, solve_network, update_loads
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import RawWarning, read_raw
-from jaxgrid.models.acmotor import Acmtblu1, MotorOptions
+from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.models.base import LoadPorts, LoadSite, ModelError
-from jaxgrid.models.cmld import (Cmldblu2, CompositeOptions, CompositeWarning,
-                                 _electronic_fraction, read_records)
+from jaxgrid.models.cmld import Cmldblu2, CompositeWarning, _electronic_fraction, read_records
 from jaxgrid.models.cmld_init import expand, initialise, internal_buses
+from jaxgrid.models.options import CompositeOptions, MotorOptions
 from jaxgrid.powerflow import solve
 from jaxgrid.models.induction import Cim5bl
 

@@ -74,7 +74,6 @@ so a collapsed voltage never asks a constant-power part for full power.
 """
 from __future__ import annotations
 
-import dataclasses
 import warnings
 from collections.abc import Sequence
 
@@ -88,55 +87,14 @@ from jaxgrid.models.base import (Array, Initial, LoadModel, LoadPorts, LoadSite,
 from jaxgrid.models.cmld_cons import CON_FRCEL, CONS_BLU1, MOTOR_D_NAMES, MOTORS
 from jaxgrid.models.cmld_init import initialise
 from jaxgrid.models.induction import Cim5bl
+from jaxgrid.models.options import CompositeOptions
 from jaxgrid.vecmath import power
 
 STATIC_V_BREAK = 0.3  # p.u.: below it the static load is a constant admittance
-EXTRA_VAR = ("load_end", "none")
-SHEDDING = ("end_use", "feeder")
-COMPENSATION = ("bf", "static_q")
 
 
 class CompositeWarning(UserWarning):
     """CMLD data read with a caveat (non-zero ICONs of unknown meaning)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class CompositeOptions:
-    """Readings of the composite load where the specification leaves a choice (module doc).
-
-    Attributes:
-      compensation: "bf" (default; spec §6 steps 3-5, WECC): the feeder compensation Bf
-        closes the reactive balance at the load bus; "static_q" (InterPSS, spec §6 last
-        paragraph): Bf = 0 and the static load's Q takes the mismatch.
-      extra_var: "load_end" (default): a tripped component takes its initial-MW share of the
-        load-end compensation (1 − Fb)·Bf with it; "none": the compensation stays.
-      v_floor: p.u.; the initial load-bus voltage is raised to at least this by scaling the
-        feeder impedance down (spec §6 step 6; WECC/InterPSS 0.95). 0 switches it off.
-      floor_step: fraction of the given feeder impedance removed per adjustment (0.01).
-      shedding: "end_use" (default, spec §9): the load slot's connected fraction scales
-        every component and the load-end compensation; "feeder": it scales the whole feeder
-        (transformer, shunts, feeder and components) as seen from the system bus, which
-        then gets a load slot too (`CmldFeederShed`).
-    """
-
-    compensation: str = "bf"
-    extra_var: str = "load_end"
-    v_floor: float = 0.95
-    floor_step: float = 0.01
-    shedding: str = "end_use"
-
-    def __post_init__(self):
-        if self.extra_var not in EXTRA_VAR:
-            raise ValueError(f"extra_var = {self.extra_var!r}: allowed {', '.join(EXTRA_VAR)}")
-        if self.compensation not in COMPENSATION:
-            raise ValueError(f"compensation = {self.compensation!r}: allowed "
-                             f"{', '.join(COMPENSATION)}")
-        if self.shedding not in SHEDDING:
-            raise ValueError(f"shedding = {self.shedding!r}: allowed {', '.join(SHEDDING)}")
-        if not 0.0 <= self.v_floor < 1.5:
-            raise ValueError(f"v_floor = {self.v_floor!r} p.u.: allowed [0, 1.5)")
-        if not 0.0 < self.floor_step < 1.0:
-            raise ValueError(f"floor_step = {self.floor_step!r}: allowed (0, 1)")
 
 
 class Cmldblu2(LoadModel):

@@ -9,19 +9,17 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from jaxgrid.case import PQ, Case, build_case, to_rows
 from jaxgrid.io.dyr import DyrRecord
-from jaxgrid.models.acmotor import NO_DIP, Acmtblu1, MotorOptions
+from jaxgrid.models.acmotor import NO_DIP, Acmtblu1
 from jaxgrid.models.base import Initial, LoadSite, ModelError, device_label
 from jaxgrid.models.cmld_cons import MOTOR_D_NAMES, MOTORS
 from jaxgrid.models.induction import Cim5bl, solve_slip, steady_state, transient_constants
-
-if TYPE_CHECKING:  # the composite load's readings (jaxgrid.models.cmld imports this module)
-    from jaxgrid.models.cmld import CompositeOptions
+from jaxgrid.models.options import CompositeOptions, MotorOptions
 
 LL_OVER_LPP = 0.8  # Ll = 0.8·Lpp (WECC note on PSS/E's CMLD, spec §8 question 3)
 SECANT_STEPS = 60  # iterations of the Bf root find (converges in < 10)
