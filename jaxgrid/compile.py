@@ -24,16 +24,17 @@ from jaxgrid.case import ISOLATED, PQ, Case
 from jaxgrid.dynamics import FAMILIES, derivatives, update_loads
 from jaxgrid.grid import DeviceGroup, GridModel, GridState
 from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
-from jaxgrid.models.acmotor import LOAD_MOTORS, MotorOptions
+from jaxgrid.models.acmotor import LOAD_MOTORS
 from jaxgrid.models.base import (Initial, LoadSite, ModelError, Signals, StartPoint,
                                  device_label)
-from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions, run_model
+from jaxgrid.models.cmld import COMPOSITE_LOADS, composite_records, read_records, run_model
 from jaxgrid.models.cmld_init import expand
 from jaxgrid.models.exciters import EXCITERS
 from jaxgrid.models.governors import GOVERNORS
 from jaxgrid.models.induction import INDUCTION_MOTORS
 from jaxgrid.models.loads import LoadSplit, split_bus_loads
 from jaxgrid.models.machines import MACHINES
+from jaxgrid.models.options import CompositeOptions, MotorOptions
 from jaxgrid.powerflow import PowerFlowResult, admittance_matrix, bus_loads, solve
 
 LOAD_MODELS = {**LOAD_MOTORS, **INDUCTION_MOTORS}
@@ -110,9 +111,10 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
                   pf: PowerFlowResult | None = None) -> GridModel:
     """A GridModel for `case` at its power-flow point with the dynamic models of `dyr`.
 
-    Composite loads (CMLDBLU1/2) first add their low-side and load buses to the case
-    (`jaxgrid.models.cmld_init.expand`); the model's buses are then the RAW buses followed by
-    those internal buses, named in `GridModel.bus_names`.
+    Composite loads (CMLDBLU1/2) start with the other load models at their system buses,
+    then add their low-side and load buses to the case (`jaxgrid.models.cmld_init.expand`);
+    the model's buses are then the RAW buses followed by those internal buses, named in
+    `GridModel.bus_names`.
 
     Raises DyrError (unsupported models, strict) or ModelError (bad CONs, naming file,
     line, device and field); warns InitWarning when a device does not start at rest.
@@ -120,17 +122,6 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     pf = solve(case) if pf is None else pf
     notes: list[str] = []
     records = _classify(dyr, case, options.strict, notes)
-    composite = [r for r in records["load"] if r.model in COMPOSITE_LOADS]
-    records["load"] = [r for r in records["load"] if r.model not in COMPOSITE_LOADS]
-    names = {}
-    if composite:
-        grown = expand(case, pf.vm, pf.va, composite, options.composite, options.motors, notes)
-        case, names = grown.case, grown.names
-        pf = dataclasses.replace(pf, case=case, vm=grown.vm, va=grown.va, bus_kind=np.concatenate(
-            [pf.bus_kind, np.full(len(grown.vm) - len(pf.vm), PQ)]))
-    v0 = pf.vm * np.exp(1j * pf.va)
-    gen = case.generators
-    on = gen.in_service & (case.buses.kind[gen.bus] != ISOLATED)
     keys, load_keys = _unit_keys(case)
     machines = _machine_groups(case, records["machine"], keys, options.strict, notes)
     order = np.array([u for g in machines for u in g.units], dtype=int)
@@ -139,29 +130,28 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
                "exciters": _controller_groups(case, records["exciter"], EXCITERS, keys, position),
                "governors": _controller_groups(case, records["governor"], GOVERNORS, keys,
                                                position),
-               "loads": _load_groups(records["load"], load_keys)}
+               "loads": _load_groups(records["load"], load_keys, options.composite)}
 
+    gen = case.generators
     sbase = case.base_mva
     ratio = np.where(gen.mbase[order] > 0, gen.mbase[order], sbase) / sbase
-    vt0 = v0[gen.bus[order]]
+    vt0 = (pf.vm * np.exp(1j * pf.va))[gen.bus[order]]
     i0 = np.conj((pf.pg[order] + 1j * pf.qg[order]) / ratio / vt0)  # machine base
-    s_load = _bus_load_at(case, pf)
-    started, point = _start(pending, _start_point(case, pf, vt0, i0, s_load.real, options))
+    bus_p = _bus_load_at(_without_composite(case, pending["loads"]), pf).real
+    started, point = _start(pending, _start_point(case, pf, vt0, i0, bus_p, options))
     machines, m_states = _device_groups(started["machines"])
     exciters, e_states = _device_groups(started["exciters"])
     governors, g_states = _device_groups(started["governors"])
     efd0, pm0 = (np.asarray(a) for a in (point.signals.efd, point.signals.pm))
 
+    case, pf, loads, names, upstream = _expand(case, pf, records["load"], started["loads"],
+                                               options.composite, notes)
+    v0 = pf.vm * np.exp(1j * pf.va)
+    on = gen.in_service & (case.buses.kind[gen.bus] != ISOLATED)
     z_source = np.concatenate([g.params["ra"] + 1j * g.params["xs"] for g in machines])
     y_norton = ratio / z_source
-    motors = _load_units(case, started["loads"], s_load.real, notes)
-    upstream = np.zeros(0, dtype=int)
-    if composite:
-        motors.append(LoadModelUnits(run_model(options.composite), grown.labels,
-                                     grown.load_bus, grown.params, grown.states, grown.flags,
-                                     grown.s0))
-        if options.composite.shedding == "feeder":  # the system buses get load slots too
-            upstream = grown.system_bus
+    s_load = _bus_load_at(case, pf)
+    motors = _load_units(case, loads, s_load.real, notes)
     s_static = s_load.copy()
     for m in motors:
         np.add.at(s_static, m.buses, -m.s0)
@@ -410,16 +400,36 @@ def _controller_groups(case, records, registry, keys, position) -> list[Pending]
     return groups
 
 
-def _load_groups(records, load_keys) -> list[Pending]:
-    """Load-model groups in LOAD_MODELS order; index = their load records."""
+def _load_groups(records, load_keys, composite: CompositeOptions) -> list[Pending]:
+    """Load-model groups in LOAD_MODELS order, then one group of every composite load
+    (`composite_records` order) run by `run_model(composite)`; index = their load records."""
     groups = []
     for name, model in LOAD_MODELS.items():
         rs = [r for r in records if r.model == name]
         if rs:
-            units = tuple(load_keys[_key(r)] for r in rs)
-            groups.append(Pending(model, model.prepare(model.read(rs)),
-                                  tuple(device_label(r) for r in rs), units, units))
+            groups.append(_load_group(model, model.prepare(model.read(rs)), rs, load_keys))
+    rs = composite_records(records)
+    if rs:
+        model = run_model(composite)
+        groups.append(_load_group(model, model.prepare(read_records(rs)), rs, load_keys))
     return groups
+
+
+def _load_group(model, params, records, load_keys) -> Pending:
+    """The group of `records`' units; index = their load records."""
+    units = tuple(load_keys[_key(r)] for r in records)
+    return Pending(model, params, tuple(device_label(r) for r in records), units, units)
+
+
+def _without_composite(case: Case, groups: list[Pending]) -> Case:
+    """`case` with the load records of composite loads out of service: `expand` moves them
+    to the load buses it adds, so the other load models' sites see the expanded case's bus
+    load."""
+    taken = [u for g in groups if g.model.name in COMPOSITE_LOADS for u in g.units]
+    in_service = case.loads.in_service.copy()
+    in_service[taken] = False
+    return dataclasses.replace(case, loads=dataclasses.replace(case.loads,
+                                                               in_service=in_service))
 
 
 def _start_point(case, pf, vt0, i0, bus_p, options) -> StartPoint:
@@ -460,6 +470,24 @@ def _start(pending: dict[str, list[Pending]],
                 point = point._replace(signals=point.signals._replace(**signals))
                 started[family].append((g, start))
     return started, point
+
+
+def _expand(case, pf, records, started, composite: CompositeOptions, notes):
+    """The composite loads' buses and branches added to the case after they started
+    (`expand`, its notes appended). Returns (case, pf: its power flow, started: the load
+    groups with the composite group's units now the load records `expand` moved to the load
+    buses, names: {internal bus number: name}, upstream: the system buses that get load slots
+    too (feeder shedding), bus indices); case and pf unchanged without composite loads."""
+    for k, (g, start) in enumerate(started):
+        if g.model.name in COMPOSITE_LOADS:
+            grown = expand(case, pf.vm, pf.va, composite_records(records), g.units, start, notes)
+            pf = dataclasses.replace(pf, case=grown.case, vm=grown.vm, va=grown.va,
+                                     bus_kind=np.concatenate([pf.bus_kind, np.full(
+                                         len(grown.vm) - len(pf.vm), PQ)]))
+            moved = (g._replace(units=tuple(grown.units.tolist())), start)
+            upstream = grown.system_bus if composite.shedding == "feeder" else np.zeros(0, int)
+            return grown.case, pf, started[:k] + [moved] + started[k + 1:], grown.names, upstream
+    return case, pf, started, {}, np.zeros(0, dtype=int)
 
 
 def _device_groups(started) -> tuple[tuple[DeviceGroup, ...], tuple[dict, ...]]:

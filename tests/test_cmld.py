@@ -33,11 +33,11 @@ from jaxgrid.compile import CompileOptions, InitWarning, compile_model
 from jaxgrid.dynamics import derivatives, load_injection, solve_network, update_loads
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import RawWarning, read_raw
-from jaxgrid.models.acmotor import Acmtblu1, MotorOptions
+from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.models.base import LoadPorts, LoadSite, ModelError
-from jaxgrid.models.cmld import (Cmldblu2, CompositeOptions, CompositeWarning,
-                                 _electronic_fraction)
-from jaxgrid.models.cmld_init import expand, initialise, internal_buses, read_records
+from jaxgrid.models.cmld import Cmldblu2, CompositeWarning, _electronic_fraction, read_records
+from jaxgrid.models.cmld_init import expand, initialise, internal_buses
+from jaxgrid.models.options import CompositeOptions, MotorOptions
 from jaxgrid.powerflow import solve
 from jaxgrid.models.induction import Cim5bl
 
@@ -139,7 +139,17 @@ def test_study_observation_count_with_the_load_buses(shared_cases):
     assert internal_buses(case, records)[0] == ((100001, "Bus1_lowBus"),
                                                 (200001, "Bus1_loadBus"))
     pf = solve(case)
-    grown = expand(case, pf.vm, pf.va, records, CompositeOptions(), MotorOptions(), [])
+    loads = case.loads
+    record_of = {(int(case.buses.number[b]), i.strip()): k
+                 for k, (b, i) in enumerate(zip(loads.bus, loads.load_id))}
+    units = [record_of[r.bus, r.device_id.strip()] for r in records]
+    bus = loads.bus[units]
+    site = LoadSite(v0=pf.vm[bus] * np.exp(1j * pf.va[bus]),  # constant-power load records
+                    record_s=loads.p_power[units] + 1j * loads.q_power[units],
+                    bus_p=loads.p_power[units], sbase=case.base_mva, f_nom=case.frequency_hz,
+                    motors=MotorOptions(), composite=CompositeOptions())
+    start = Cmldblu2.init(read_records(records), site)
+    grown = expand(case, pf.vm, pf.va, records, units, start, [])
     buses = grown.case.buses
     observed = (buses.zone == 1) & (buses.base_kv >= 60.0)
     assert observed.sum() == 154
@@ -198,7 +208,7 @@ def test_load_report_names_the_initialisation(system):
 def unit(tmp_path, cons):
     """(params, states, flags) of one composite load initialised at bus voltage 1.0∠0.1."""
     (tmp_path / "u.dyr").write_text(record(cons))
-    p, records = read_records(read_dyr(tmp_path / "u.dyr").records)
+    p = read_records(read_dyr(tmp_path / "u.dyr").records)
     init = initialise(p, np.array([1.0 + 0.2j]), np.array([1.0 * np.exp(0.1j)]), SBASE, F_NOM,
                       CompositeOptions(), MotorOptions(), ("unit",))
     return init

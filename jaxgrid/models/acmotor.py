@@ -38,8 +38,6 @@ UV trips, contactors and thermal tripping keep their exact (zero) gradient.
 """
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -47,57 +45,12 @@ import numpy as np
 from jaxgrid import vecmath
 from jaxgrid.models.base import (Array, Con, Initial, LoadModel, LoadSite, Params, States,
                                  surrogate_gradient, timer_fires)
+from jaxgrid.models.options import MotorOptions
 
 VX_FLOOR = 0.3  # p.u.: lowest stall-jump voltage (spec §7 guard)
 VX_SCAN_FROM = 0.4  # p.u.: where the Vx search starts (spec §4)
 V_ANGLE_MIN = 0.1  # p.u.: below it the bus frequency measurement holds
 NO_DIP = 10.0  # p.u.: contactor memory "no dip seen" (a finite +inf)
-SHARE_MODES = ("psse_load_record", "interpss_bus_total", "fraction:x")
-VX_RULES = ("reference_running1", "spec_running2")
-
-
-@dataclasses.dataclass(frozen=True)
-class MotorOptions:
-    """Readings of motor-load data where the reference simulators disagree (module docstring).
-
-    Attributes:
-      share_mode: "psse_load_record" | "interpss_bus_total" | "fraction:x" (0 < x <= 1).
-      vx_rule: "reference_running1" | "spec_running2".
-      curve_offsets: "v0" | "1pu".
-      restall_b: let a restarted part B stall again (per-part timers).
-      stiff_below: s; induction-motor subtransient stages faster than this are dropped
-        (2 × a 5 ms step).
-    """
-
-    share_mode: str = "psse_load_record"
-    vx_rule: str = "reference_running1"
-    curve_offsets: str = "v0"
-    restall_b: bool = False
-    stiff_below: float = 0.01
-
-    def __post_init__(self):
-        if self.share_mode not in SHARE_MODES[:2]:
-            x = self.share_fraction
-            if x is None or not 0.0 < x <= 1.0:
-                raise ValueError(f"share_mode = {self.share_mode!r}: allowed "
-                                 f"{', '.join(SHARE_MODES)} with 0 < x <= 1")
-        if self.vx_rule not in VX_RULES:
-            raise ValueError(f"vx_rule = {self.vx_rule!r}: allowed {', '.join(VX_RULES)}")
-        if self.curve_offsets not in ("v0", "1pu"):
-            raise ValueError(f"curve_offsets = {self.curve_offsets!r}: allowed 'v0' or '1pu'")
-        if not self.stiff_below >= 0:
-            raise ValueError(f"stiff_below = {self.stiff_below!r} s: must be >= 0")
-
-    @property
-    def share_fraction(self) -> float | None:
-        """x of "fraction:x", else None."""
-        head, _, value = self.share_mode.partition(":")
-        if head != "fraction":
-            return None
-        try:
-            return float(value)
-        except ValueError:
-            return None
 
 
 def _t(name, info):

@@ -22,17 +22,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, ClassVar, NamedTuple
+from typing import ClassVar, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
+from jaxgrid.models.options import CompositeOptions, MotorOptions
 
-if TYPE_CHECKING:  # the load models' readings (modules that import this one)
-    from jaxgrid.models.acmotor import MotorOptions
-    from jaxgrid.models.cmld import CompositeOptions
 
 INF = math.inf
 LIMIT_TOL = 1e-6  # p.u.: initial values computed in float64 sit on a limit to round-off

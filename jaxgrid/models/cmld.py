@@ -8,9 +8,9 @@ Structure, CONs, bases, components, discrete logic and initialisation follow
 Files: the CON table is `jaxgrid.models.cmld_cons`, the initialisation and network
 expansion `jaxgrid.models.cmld_init`; this module holds the model and its readings.
 
-Network (spec §1, §7). At compile time `expand` adds, per record at system bus N (load
-LID), two buses and two branches to the case (numbers, names, zones and base kV:
-`internal_buses`):
+Network (spec §1, §7). The units start from their system buses (`Cmldblu2.init`, with the
+other load models); then `expand` adds, per record at system bus N (load LID), two buses
+and two branches to the case (numbers, names, zones and base kV: `internal_buses`):
   * the low-side bus, number N + M·(2j + 1), name "Bus<N>_lowBus", with the shunt
     Bss + Fb·Bf (system p.u.);
   * the load bus, number N + M·(2j + 2), name "Bus<N>_loadBus" (the name the PNNL task
@@ -74,7 +74,6 @@ so a collapsed voltage never asks a constant-power part for full power.
 """
 from __future__ import annotations
 
-import dataclasses
 import warnings
 from collections.abc import Sequence
 
@@ -83,66 +82,26 @@ import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
 from jaxgrid.models.acmotor import Acmtblu1
-from jaxgrid.models.base import (Array, LoadModel, LoadPorts, ModelError, Params, States,
-                                 device_label, timer_fires)
+from jaxgrid.models.base import (Array, Initial, LoadModel, LoadPorts, LoadSite, ModelError,
+                                 Params, States, device_label, timer_fires)
 from jaxgrid.models.cmld_cons import CON_FRCEL, CONS_BLU1, MOTOR_D_NAMES, MOTORS
+from jaxgrid.models.cmld_init import initialise
 from jaxgrid.models.induction import Cim5bl
+from jaxgrid.models.options import CompositeOptions
 from jaxgrid.vecmath import power
 
 STATIC_V_BREAK = 0.3  # p.u.: below it the static load is a constant admittance
-EXTRA_VAR = ("load_end", "none")
-SHEDDING = ("end_use", "feeder")
-COMPENSATION = ("bf", "static_q")
 
 
 class CompositeWarning(UserWarning):
     """CMLD data read with a caveat (non-zero ICONs of unknown meaning)."""
 
 
-@dataclasses.dataclass(frozen=True)
-class CompositeOptions:
-    """Readings of the composite load where the specification leaves a choice (module doc).
-
-    Attributes:
-      compensation: "bf" (default; spec §6 steps 3-5, WECC): the feeder compensation Bf
-        closes the reactive balance at the load bus; "static_q" (InterPSS, spec §6 last
-        paragraph): Bf = 0 and the static load's Q takes the mismatch.
-      extra_var: "load_end" (default): a tripped component takes its initial-MW share of the
-        load-end compensation (1 − Fb)·Bf with it; "none": the compensation stays.
-      v_floor: p.u.; the initial load-bus voltage is raised to at least this by scaling the
-        feeder impedance down (spec §6 step 6; WECC/InterPSS 0.95). 0 switches it off.
-      floor_step: fraction of the given feeder impedance removed per adjustment (0.01).
-      shedding: "end_use" (default, spec §9): the load slot's connected fraction scales
-        every component and the load-end compensation; "feeder": it scales the whole feeder
-        (transformer, shunts, feeder and components) as seen from the system bus, which
-        then gets a load slot too (`CmldFeederShed`).
-    """
-
-    compensation: str = "bf"
-    extra_var: str = "load_end"
-    v_floor: float = 0.95
-    floor_step: float = 0.01
-    shedding: str = "end_use"
-
-    def __post_init__(self):
-        if self.extra_var not in EXTRA_VAR:
-            raise ValueError(f"extra_var = {self.extra_var!r}: allowed {', '.join(EXTRA_VAR)}")
-        if self.compensation not in COMPENSATION:
-            raise ValueError(f"compensation = {self.compensation!r}: allowed "
-                             f"{', '.join(COMPENSATION)}")
-        if self.shedding not in SHEDDING:
-            raise ValueError(f"shedding = {self.shedding!r}: allowed {', '.join(SHEDDING)}")
-        if not 0.0 <= self.v_floor < 1.5:
-            raise ValueError(f"v_floor = {self.v_floor!r} p.u.: allowed [0, 1.5)")
-        if not 0.0 < self.floor_step < 1.0:
-            raise ValueError(f"floor_step = {self.floor_step!r}: allowed (0, 1)")
-
-
 class Cmldblu2(LoadModel):
     """CMLDBLU2 (USRLOD, 2 ICONs, 133 CONs), one unit per record, at its load bus.
 
-    `init` is not used: `expand` initialises the records together with the network it adds.
-    Powers in p.u. on the system base unless a motor's own base is named.
+    `init` starts the units from their system-bus site; `jaxgrid.models.cmld_init.expand`
+    then adds the buses and branches it found to the case. Powers in p.u. on the system base unless a motor's own base is named.
 
     Attributes (states, arrays (n,)): m{x}_epr, m{x}_epi, m{x}_psir, m{x}_psii, m{x}_w for
       x in a, b, c: motor x's E', ψk (network frame, p.u.) and speed (p.u.), as in Cim5bl.
@@ -178,6 +137,22 @@ class Cmldblu2(LoadModel):
                                   CompositeWarning, stacklevel=2)
         p.update(icon1=icons[:, 0], icon2=icons[:, 1])
         return p
+
+    @classmethod
+    def init(cls, p: Params, site: LoadSite) -> Initial:
+        """The units started from the system side (spec §6, `cmld_init.initialise`): site is
+        the system bus and the RAW load record each substation draws. Output: s0 (drawn at
+        the load bus), v_low, v_load (the internal buses' complex voltages, p.u.), arrays
+        (n,). Raises ModelError naming the unit whose record draws no active power."""
+        for k in np.flatnonzero(~(site.record_p > 0))[:1]:
+            raise ModelError(f"{site.label(k)}: the load record draws P = "
+                             f"{site.record_p[k] * site.sbase:g} MW at the power flow; the "
+                             "composite load needs P > 0")
+        start = initialise(p, site.record_s, site.v0, site.sbase, site.f_nom, site.composite,
+                           site.motors, [site.label(k) for k in range(len(site.v0))])
+        return Initial(start.params, start.states,
+                       {"s0": start.s0, "v_low": start.v_low, "v_load": start.v_load},
+                       start.flags, tuple(start.notes))
 
     @classmethod
     def check_combination(cls, p: dict[str, float]) -> str | None:
@@ -293,6 +268,20 @@ class CmldFeederShed(Cmldblu2):
 
 
 COMPOSITE_LOADS = {m.name: m for m in (Cmldblu2, Cmldblu1)}
+
+
+def composite_records(records: Sequence[DyrRecord]) -> list[DyrRecord]:
+    """The CMLDBLU2 records of `records`, then the CMLDBLU1 records, each in DYR order: the
+    order of the units of the composite loads' one group."""
+    return [r for name in COMPOSITE_LOADS for r in records if r.model == name]
+
+
+def read_records(records: Sequence[DyrRecord]) -> dict[str, np.ndarray]:
+    """CON arrays (n,) of `composite_records(records)` (not empty), each record type read by
+    its own class."""
+    parts = [model.read(rs) for name, model in COMPOSITE_LOADS.items()
+             if (rs := [r for r in records if r.model == name])]
+    return {k: np.concatenate([part[k] for part in parts]) for k in parts[0]}
 
 
 def run_model(options: CompositeOptions) -> type[Cmldblu2]:

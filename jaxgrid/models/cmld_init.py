@@ -1,8 +1,8 @@
 """Initialisation of the WECC composite load and its network expansion (`shared/specs/cmld.md`
 §3, §6, §7; host, NumPy float64).
 
-`expand` adds each record's low-side and load buses and branches to the case and
-initialises the units from the system side (`initialise`); the model itself is
+`initialise` starts the units from the system side (`Cmldblu2.init` calls it); `expand` then
+adds each unit's low-side and load buses and branches to the case; the model itself is
 `jaxgrid.models.cmld` (its docstring lists the readings), the CONs `jaxgrid.models.cmld_cons`.
 """
 from __future__ import annotations
@@ -15,11 +15,11 @@ import numpy as np
 
 from jaxgrid.case import PQ, Case, build_case, to_rows
 from jaxgrid.io.dyr import DyrRecord
-from jaxgrid.models.acmotor import NO_DIP, Acmtblu1, MotorOptions
-from jaxgrid.models.base import LoadSite, ModelError, device_label
-from jaxgrid.models.cmld import COMPOSITE_LOADS, CompositeOptions
+from jaxgrid.models.acmotor import NO_DIP, Acmtblu1
+from jaxgrid.models.base import Initial, LoadSite, ModelError, device_label
 from jaxgrid.models.cmld_cons import MOTOR_D_NAMES, MOTORS
 from jaxgrid.models.induction import Cim5bl, solve_slip, steady_state, transient_constants
+from jaxgrid.models.options import CompositeOptions, MotorOptions
 
 LL_OVER_LPP = 0.8  # Ll = 0.8·Lpp (WECC note on PSS/E's CMLD, spec §8 question 3)
 SECANT_STEPS = 60  # iterations of the Bf root find (converges in < 10)
@@ -27,111 +27,74 @@ SECANT_TOL = 1e-13  # p.u. system base: reactive mismatch accepted at the load b
 
 
 class Expansion(NamedTuple):
-    """The case with the composite loads' buses and branches, and the initialised units.
+    """The case with the composite loads' buses and branches.
 
     Attributes:
       case: the expanded case (internal buses appended after the RAW buses).
       vm, va: (n_bus,) power-flow voltages of the expanded case, p.u., rad.
-      load_bus: (n,) bus index of each unit's load bus in `case`.
+      units: (n,) index in `case.loads` of each unit's load record, moved to its load bus.
       system_bus: (n,) bus index of each unit's system (RAW) bus.
-      params, states, flags: {name: (n,)} of the units (Cmldblu2 layout).
-      s0: (n,) complex power each unit draws at its load bus, p.u. system base.
-      labels: (n,) "file:line: MODEL at bus B id 'I'".
       names: {internal bus number: name} ("Bus<N>_loadBus", "Bus<N>_lowBus").
     """
 
     case: Case
     vm: np.ndarray
     va: np.ndarray
-    load_bus: np.ndarray
+    units: np.ndarray
     system_bus: np.ndarray
-    params: dict
-    states: dict
-    flags: dict
-    s0: np.ndarray
-    labels: tuple[str, ...]
     names: dict[int, str]
 
 
-def read_records(records: Sequence[DyrRecord]) -> tuple[dict, list[DyrRecord]]:
-    """CON arrays of CMLDBLU1/CMLDBLU2 records, stacked in the order of the returned list."""
-    ordered, parts = [], []
-    for name, model in COMPOSITE_LOADS.items():
-        rs = [r for r in records if r.model == name]
-        if rs:
-            ordered += rs
-            parts.append(model.read(rs))
-    params = {k: np.concatenate([part[k] for part in parts]) for k in parts[0]}
-    return params, ordered
-
-
 def expand(case: Case, vm: np.ndarray, va: np.ndarray, records: Sequence[DyrRecord],
-           options: CompositeOptions, motors: MotorOptions, notes: list[str]) -> Expansion:
-    """Add each record's buses and branches to `case` and initialise it (spec §6, §7).
+           units: Sequence[int], start: Initial, notes: list[str]) -> Expansion:
+    """Add each started unit's buses and branches to `case` (spec §7).
 
-    vm, va (n_bus,): the power-flow solution of `case`. Each record's RAW load record (at
-    the solved voltage) is what its substation draws; it moves to the new load bus.
-    Appends the load report to `notes`. Raises ModelError naming the record.
+    vm, va (n_bus,): the power-flow solution of `case`; records (n,): the units' DYR records,
+    units (n,): their RAW load records (indices in `case.loads`), start: their `Initial`
+    (`Cmldblu2.init`: b_low, x_xf, ratio, r_fdr, x_fdr; v_low, v_load, s0). Each load
+    record moves to its new load bus with the power s0 the feeder delivers there. Appends
+    the CMLDBLU1 report (no FRCEL) to `notes`.
     """
-    p, records = read_records(records)
-    loads, number = case.loads, case.buses.number
-    where = {(int(number[loads.bus[k]]), loads.load_id[k].strip().upper()): k
-             for k in np.flatnonzero(loads.in_service)}
-    units = np.array([where[(r.bus, r.device_id.strip().upper())] for r in records])
-    bus = loads.bus[units]
-    vmr = vm[bus]
-    s_rec = (loads.p_power[units] + 1j * loads.q_power[units]
-             + (loads.p_current[units] + 1j * loads.q_current[units]) * vmr
-             + (loads.p_impedance[units] + 1j * loads.q_impedance[units]) * vmr ** 2)
-    labels = tuple(device_label(r) for r in records)
-    for k in np.flatnonzero(~(s_rec.real > 0))[:1]:
-        raise ModelError(f"{labels[k]}: the load record draws P = "
-                         f"{s_rec[k].real * case.base_mva:g} MW at the power flow; the "
-                         "composite load needs P > 0")
-    init = initialise(p, s_rec, vmr * np.exp(1j * va[bus]), case.base_mva, case.frequency_hz,
-                      options, motors, labels)
-    notes.extend(f"load report: {line}" for line in init.notes)
-    notes.extend(f"load report: {label}: CMLDBLU1 has no FRCEL: taken as 0"
-                 for r, label in zip(records, labels) if r.model == "CMLDBLU1")
+    units = np.asarray(units, dtype=int)
+    bus = case.loads.bus[units]
+    params = {k: np.asarray(start.params[k]) for k in ("b_low", "x_xf", "ratio", "r_fdr",
+                                                       "x_fdr")}
+    v_low, v_load, s0 = (np.asarray(start.output[k]) for k in ("v_low", "v_load", "s0"))
+    notes.extend(f"load report: {device_label(r)}: CMLDBLU1 has no FRCEL: taken as 0"
+                 for r in records if r.model == "CMLDBLU1")
 
     rows = to_rows(case)
-    names, load_numbers = {}, []
+    names, moved = {}, []
     for k, (r, ((low, low_name), (load, load_name))) in enumerate(
             zip(records, internal_buses(case, records))):
         names[low], names[load] = low_name, load_name
-        load_numbers.append(load)
         parent = rows["buses"][int(bus[k])]
-        for n, v, kv in ((low, init.v_low[k], 0.0), (load, init.v_load[k], parent["base_kv"])):
+        for n, v, kv in ((low, v_low[k], 0.0), (load, v_load[k], parent["base_kv"])):
             rows["buses"].append(dict(parent, number=n, name=names[n], kind=PQ, base_kv=kv,
                                       vm=abs(v), va=np.angle(v), line=r.line))
         rows["loads"][int(units[k])] = dict(rows["loads"][int(units[k])], in_service=False)
+        moved.append(len(rows["loads"]))
         rows["loads"].append(dict(rows["loads"][int(units[k])], bus=load, in_service=True,
-                                  p_power=init.s0[k].real, q_power=init.s0[k].imag,
+                                  p_power=s0[k].real, q_power=s0[k].imag,
                                   p_current=0.0, q_current=0.0, p_impedance=0.0,
                                   q_impedance=0.0))
         rows["shunts"].append(dict(bus=low, shunt_id="cm", in_service=True, g=0.0,
-                                   b=init.params["b_low"][k], line=r.line))
+                                   b=params["b_low"][k], line=r.line))
         branch = dict(ckt="cm", in_service=True, b=0.0, shift=0.0, g_from=0.0, b_from=0.0,
                       g_to=0.0, b_to=0.0, line=r.line)
         rows["branches"].append(dict(branch, from_bus=low, to_bus=r.bus, r=0.0,
-                                     x=init.params["x_xf"][k], tap=init.params["ratio"][k],
+                                     x=params["x_xf"][k], tap=params["ratio"][k],
                                      is_transformer=True))
         rows["branches"].append(dict(branch, from_bus=low, to_bus=load,
-                                     r=init.params["r_fdr"][k], x=init.params["x_fdr"][k],
+                                     r=params["r_fdr"][k], x=params["x_fdr"][k],
                                      tap=1.0, is_transformer=False))
     rows["notes"] = tuple(case.notes) + (f"{len(records)} composite load(s): internal buses "
                                          "added (jaxgrid.models.cmld_init.internal_buses)",)
     expanded = build_case(**rows)
-    v_new = np.concatenate([init.v_low, init.v_load])
-    order = np.ravel(np.stack([np.arange(len(records)), np.arange(len(records)) + len(records)],
-                              axis=1))
-    v_new = v_new[order]
+    v_new = np.ravel(np.stack([v_low, v_load], axis=1))
     return Expansion(case=expanded, vm=np.concatenate([vm, np.abs(v_new)]),
-                     va=np.concatenate([va, np.angle(v_new)]),
-                     load_bus=expanded.bus_index(load_numbers), system_bus=bus,
-                     params=init.params,
-                     states=init.states, flags=init.flags, s0=init.s0, labels=labels,
-                     names=names)
+                     va=np.concatenate([va, np.angle(v_new)]), units=np.array(moved),
+                     system_bus=bus, names=names)
 
 
 def internal_buses(case: Case, records: Sequence[DyrRecord]):

@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.io.dyr import DyrRecord
-from jaxgrid.models.acmotor import MotorOptions
+from jaxgrid.models.options import MotorOptions
 from jaxgrid.models.base import (Array, Con, Initial, LoadModel, LoadPorts, LoadSite, ModelError,
                                  Params, States,
                                  device_label, quadratic_saturation,
