@@ -1,9 +1,10 @@
-"""The PPO baseline (`baselines.ppo`, `experiments.train_ppo`): the gymnax adapter steps as the
-functional env does, at the drawn task's operating point; the losses equal a hand computation;
-a run killed after a chunk resumes to the state of an uninterrupted one; the saved policy
-evaluates through `experiments.evaluate --controller ppo:PATH` and a layout mismatch is named.
-rejax's own PPO learning is rejax's test (CartPole); nothing here trains for long. Tiny
-settings (0.3 s episodes, 4 envs × 3 steps) keep it to a few compiles."""
+"""The PPO baseline (`baselines.ppo`, `baselines.ppo_train`, `experiments.train_ppo`): the
+gymnax adapter steps as the functional env does, at the drawn task's operating point; the
+losses equal a hand computation; a run killed after a chunk resumes to the state of an
+uninterrupted one; the saved policy evaluates through `experiments.evaluate --controller
+ppo:PATH` and a layout mismatch is named. rejax's own PPO learning is rejax's test
+(CartPole); nothing here trains for long. Tiny settings (0.3 s episodes, 4 envs × 3 steps)
+keep it to a few compiles."""
 from __future__ import annotations
 
 import json

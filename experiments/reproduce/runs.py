@@ -3,9 +3,9 @@
 A run's folder (or file) under OUT/runs/ is named by what it is and a hash of everything it
 depends on: the study (its TOML text) and the run's settings. A finished run is reused; a
 training run that was interrupted resumes from its last checkpoint; a changed input gives a
-new name, so nothing stale is ever read back. PARS trainings are library calls
-(`experiments.train.train_study`, named by their `ars.train.TrainConfig`), PPO trainings
-`experiments.train_ppo.main` with flags (its loop lives in the command).
+new name, so nothing stale is ever read back. PARS and PPO trainings are library calls
+(`experiments.train.train_study` and `experiments.train_ppo.train_study`), named by their
+`ars.train.TrainConfig` and `baselines.ppo_train.PPOTrainConfig`.
 """
 from __future__ import annotations
 
@@ -210,18 +210,23 @@ class Runs:
 
     # --- PPO -------------------------------------------------------------------------------
     def ppo(self, seed: int, env_steps: int) -> Path:
-        """A finished PPO training (`experiments.train_ppo`, the study's Table II defaults) of
-        `env_steps` environment steps; its folder."""
-        s = self.settings
-        flags = ["--env-steps", str(env_steps), "--seed", str(seed), *s.ppo_flags]
-        folder = self.folder(f"ppo_seed{seed}", {"flags": flags})
+        """A finished PPO training (`experiments.train_ppo.train_study`, the study's Table II
+        defaults with `settings.ppo_flags`) of `env_steps` environment steps; its folder,
+        named by its `baselines.ppo_train.PPOTrainConfig`. An interrupted one resumes."""
+        from experiments.train_ppo import config_from_args, parser
+        from experiments.train_ppo import train_study as train_ppo_study
+
+        flagged = config_from_args(parser().parse_args(list(self.settings.ppo_flags)))
+        config = dataclasses.replace(flagged, env_steps=env_steps,
+                                     ppo=dataclasses.replace(flagged.ppo, seed=seed))
+        inputs = {k: v for k, v in dataclasses.asdict(config).items()
+                  if k not in ("out", "resume")}
+        folder = self.folder(f"ppo_seed{seed}", {"config": inputs})
         self.trainings.add(folder)
         if (folder / "policy").is_dir():
             return folder
-        from experiments.train_ppo import main as train_ppo
-        resume = ["--resume"] if any((folder / "checkpoints").glob("[0-9]*")) else []
-        if train_ppo(["--study", str(self.study_file), *flags, "--out", str(folder), *resume]):
-            raise RuntimeError(f"PPO training in {folder} failed")
+        resume = any((folder / "checkpoints").glob("[0-9]*"))
+        train_ppo_study(self.study, dataclasses.replace(config, out=str(folder), resume=resume))
         return folder
 
     def best_ppo(self, env_steps: int) -> str:
