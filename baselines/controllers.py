@@ -17,7 +17,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from jaxgrid.env import LoadSheddingEnv
-from jaxgrid.rollouts import layout
+from jaxgrid.rollouts import GRID_VMAPS, layout
 from jaxgrid.study import Study
 
 SPECS = "none, uvls, mpc[:OPTIONS], policy:PATH or ppo:PATH"
@@ -63,11 +63,10 @@ def check_layout(control: str, info: dict, study: Study, env: LoadSheddingEnv) -
 
 def pars_apply(policy):
     """policy_apply of a PARS `ars.policies.Policy` with its observation normaliser, the
-    network batch-first where `jaxgrid.batching.vmap_minor` batches it (as in training)."""
+    network batched as in training (`jaxgrid.rollouts.GRID_VMAPS`)."""
     from ars.pars import normalized_policy
-    from jaxgrid.batching import batch_major
 
-    return normalized_policy(policy, batch_major)
+    return normalized_policy(policy, GRID_VMAPS.network)
 
 
 def controller(spec: str, env: LoadSheddingEnv, saved=None):
