@@ -23,7 +23,9 @@ The prediction model (choices, documented where they differ from the plant):
   * What it knows: before the fault starts the prediction runs without it (no clairvoyance);
     from the fault's start on it knows the fault, its impedance and its clearing time (set
     by protection).
-  * `dt`: the prediction may step coarser than the plant (0: the plant's step).
+  * `dt`: the prediction may step coarser than the plant (0: the plant's step). It steps
+    at one fixed step: a plant's coarse step outside the fault window (`EnvConfig.coarse_dt`)
+    is not used, since its per-agent-step choice has no reverse-mode gradient.
 """
 from __future__ import annotations
 
@@ -179,7 +181,9 @@ class Mpc(Planner):
     def __init__(self, env: LoadSheddingEnv, options: MpcOptions):
         cfg = env.config
         self.options = options
-        self.prediction = env.with_config(dt=options.dt) if options.dt else env
+        # one fixed step (a scan: the gradient needs reverse mode, which a step chosen per
+        # agent step, coarse_dt's while loop, does not have)
+        self.prediction = env.with_config(dt=options.dt or cfg.dt, coarse_dt=None)
         self.agent_dt = cfg.agent_dt
         self.steps = int(round(options.horizon / cfg.agent_dt))
         if self.steps < options.every:

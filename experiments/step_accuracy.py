@@ -2,8 +2,14 @@
 small-step, many-sweep reference over the study's training tasks, without control.
 
     python -m experiments.step_accuracy --study ieee39_fidvr [--dts 0.002 0.005 0.01]
-        [--sweeps 2] [--reference-dt 0.001] [--reference-sweeps 4] [--tasks train]
+        [--sweeps 2] [--coarse-dts 0 0.01] [--fine-window 1.0] [--coarse-sweeps K]
+        [--reference-dt 0.001]
+        [--reference-sweeps 4] [--reference-precision float64] [--tasks train]
         [--episode S] [--out benchmarks/cpu/step_accuracy.json]
+
+A candidate is a (step, sweeps, coarse step) triple: the coarse step (`EnvConfig.coarse_dt`,
+0 for none) is used outside the fault window, `--fine-window` s after clearing, with
+`--coarse-sweeps` network sweeps (default: the candidate's).
 
 For each candidate it reports, over every task and agent step (0.1 s samples of the observed
 bus voltages, float32 time loop as in training): the 99th-percentile and largest |ΔV|
@@ -18,6 +24,7 @@ tasks this set does not hold); the command names it.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
 import time
@@ -34,10 +41,12 @@ ACCURACY_P99 = 1e-3  # p.u.: the largest p99 |ΔV| a study's default step may ha
 ACCURACY_AT_CHECK = 5e-3  # p.u.: its largest |ΔV| at the recovery check
 
 
-def run(study: Study, dt: float, episode: float, tasks: str):
+def run(study: Study, dt: float, episode: float, tasks: str, coarse_dt: float | None = None,
+        fine_window: float = 1.0, coarse_sweeps: int | None = None):
     """(vm (n_task, n_steps, n_observed), recovered (n_task,), warm wall time s) without
-    control at step dt."""
-    env = study.env(dt=dt, episode=episode)
+    control at step dt (coarse_dt outside the fault window, None: dt throughout)."""
+    env = study.env(dt=dt, episode=episode, coarse_dt=coarse_dt, fine_window=fine_window,
+                    coarse_sweeps=coarse_sweeps)
     apply, params, carry = no_control(env)
     specs = study.tasks(tasks)
     rollout_specs(study, env, apply, params, specs, carry, trace=True)  # compile
@@ -55,26 +64,32 @@ def check_index(study: Study, tasks: str, agent_dt: float, n_steps: int) -> np.n
 
 
 def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: int,
-             tasks: str = "train", episode: float | None = None) -> dict:
-    """The report of the module docstring as a dict."""
+             tasks: str = "train", episode: float | None = None, coarse_dts=(0.0,),
+             fine_window: float = 1.0, coarse_sweeps: int | None = None,
+             reference_precision: str = "float64") -> dict:
+    """The report of the module docstring as a dict; a coarse step of 0 means none."""
     episode = episode or study.config.episode
-    reference = rebuild(study, precision="float64", sweeps=reference_sweeps)
+    reference = rebuild(study, precision=reference_precision, sweeps=reference_sweeps)
     vm_ref, ok_ref, _ = run(reference, reference_dt, episode, tasks)
     check = check_index(study, tasks, study.config.agent_dt, vm_ref.shape[1])
     rows = []
     for n_sweeps in sweeps:
         candidate_study = rebuild(study, precision="float32", sweeps=n_sweeps)
-        for dt in dts:
-            vm, ok, wall = run(candidate_study, dt, episode, tasks)
+        for dt, coarse in itertools.product(dts, coarse_dts):
+            if coarse and coarse <= dt:
+                continue
+            vm, ok, wall = run(candidate_study, dt, episode, tasks, coarse or None, fine_window,
+                               coarse_sweeps)
             error = np.abs(vm - vm_ref)
             at_check = error[np.arange(len(check)), check]
-            rows.append({"dt_s": dt, "sweeps": n_sweeps,
+            rows.append({"dt_s": dt, "sweeps": n_sweeps, "coarse_dt_s": coarse or None,
                          "p99_dv_pu": float(np.percentile(error, 99)),
                          "max_dv_pu": float(error.max()),
                          "max_dv_at_check_pu": float(at_check.max()),
                          "changed_verdicts": int(np.sum(ok != ok_ref)), "wall_s": wall})
     own = [r for r in rows if r["dt_s"] == study.config.dt
-           and r["sweeps"] == study.definition.compile.sweeps]
+           and r["sweeps"] == study.definition.compile.sweeps
+           and r["coarse_dt_s"] == study.config.coarse_dt]
     for row in rows:
         row["time_ratio_to_study_step"] = row["wall_s"] / own[0]["wall_s"] if own else None
     good = [r for r in rows if r["p99_dv_pu"] <= ACCURACY_P99 and r["changed_verdicts"] == 0
@@ -82,11 +97,12 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
     best = min(good, key=lambda r: r["wall_s"]) if good else None
     return {"study": study.name, "tasks": tasks, "n_tasks": len(ok_ref), "episode_s": episode,
             "reference": {"dt_s": reference_dt, "sweeps": reference_sweeps,
-                          "precision": "float64", "recovered": int(ok_ref.sum())},
-            "study_step": {"dt_s": study.config.dt,
-                           "sweeps": study.definition.compile.sweeps},
+                          "precision": reference_precision, "recovered": int(ok_ref.sum())},
+            "study_step": {"dt_s": study.config.dt, "sweeps": study.definition.compile.sweeps,
+                           "coarse_dt_s": study.config.coarse_dt},
+            "fine_window_s": fine_window, "coarse_sweeps": coarse_sweeps,
             "candidates": rows,
-            "recommended": best and {"dt_s": best["dt_s"], "sweeps": best["sweeps"]}}
+            "recommended": best and {k: best[k] for k in ("dt_s", "sweeps", "coarse_dt_s")}}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -96,8 +112,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--dts", nargs="+", type=float, default=[0.002, 0.005, 0.01],
                    help="candidate steps, s")
     p.add_argument("--sweeps", nargs="+", type=int, default=[2], help="candidate sweeps")
+    p.add_argument("--coarse-dts", nargs="+", type=float, default=[0.0],
+                   help="candidate steps outside the fault window, s (0: none)")
+    p.add_argument("--fine-window", type=float, default=1.0,
+                   help="s after clearing at the fine step (with a coarse step)")
+    p.add_argument("--coarse-sweeps", type=int, help="network sweeps at the coarse step")
     p.add_argument("--reference-dt", type=float, default=0.001, help="s (default 1 ms)")
     p.add_argument("--reference-sweeps", type=int, default=4)
+    p.add_argument("--reference-precision", choices=("float64", "float32"), default="float64")
     p.add_argument("--tasks", default="train", help="the study's task set")
     p.add_argument("--episode", type=float, help="s (default: the study's)")
     p.add_argument("--out", default="benchmarks/cpu/step_accuracy.json")
@@ -105,12 +127,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         study = study_from_args(args)
         report = accuracy(study, args.dts, args.sweeps, args.reference_dt,
-                          args.reference_sweeps, args.tasks, args.episode)
+                          args.reference_sweeps, args.tasks, args.episode, args.coarse_dts,
+                          args.fine_window, args.coarse_sweeps, args.reference_precision)
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     for row in report["candidates"]:
-        print(f"dt {row['dt_s'] * 1000:g} ms, {row['sweeps']} sweeps: p99 |dV| "
+        coarse = f" ({row['coarse_dt_s'] * 1000:g} ms outside)" if row["coarse_dt_s"] else ""
+        print(f"dt {row['dt_s'] * 1000:g} ms{coarse}, {row['sweeps']} sweeps: p99 |dV| "
               f"{row['p99_dv_pu']:.2e}, max {row['max_dv_pu']:.2e}, at the check "
               f"{row['max_dv_at_check_pu']:.2e} p.u.; {row['changed_verdicts']} changed "
               f"verdicts of {report['n_tasks']}; {row['wall_s']:.2f} s")

@@ -38,8 +38,8 @@ from jaxgrid.case import VOLTAGE
 from jaxgrid.checks import InputError, Range, check_unique
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
-from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, clip_closed, initial_health,
-                              observe, shed)
+from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, checked, clip_closed,
+                              initial_health, integrate, observe, shed)
 
 
 @struct.dataclass
@@ -96,6 +96,16 @@ def check_params(values: dict, key=lambda field: field) -> None:
 AGENT_DT = Range(0.0, 60.0, "s", lo_open=True)
 EPISODE = Range(0.0, 3600.0, "s", lo_open=True)
 HISTORY = Range(1, 1000, "observations")
+FINE_WINDOW = Range(0.0, 3600.0, "s after clearing")
+SWEEPS = Range(1, 100, "network sweeps")
+
+
+def _check_int(key: str, value, allowed: Range) -> None:
+    """InputError naming `key` unless value is an int (not a bool) inside `allowed`."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(key, value, f"must be an integer in {allowed}")
+    allowed.check(key, value)
+
 
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
@@ -103,7 +113,14 @@ class EnvConfig:
 
     Attributes:
       observed_buses, action_buses: RAW bus numbers.
-      dt: simulation step, s.  agent_dt: control step, s.  episode: length, s.
+      dt: simulation step, s (inside the fault window when coarse_dt is set).
+      coarse_dt: simulation step outside the fault window, s; None: dt throughout. An agent
+        step that overlaps [fault start, clearing + fine_window) runs at dt, every other
+        one at coarse_dt (the steady state before the fault and the slow recovery after
+        it). Its accuracy is measured like dt's (`experiments.step_accuracy`).
+      fine_window: s after clearing that the step stays dt (used with coarse_dt).
+      coarse_sweeps: network sweeps per solution at coarse_dt (None: the model's).
+      agent_dt: control step, s.  episode: length, s.
       history: number of last observations stacked (1: just the current one).
       include_action_status: the observation ends with the connected load fraction at the
         action buses (PNNL includeActionStatusInObservations).
@@ -114,6 +131,9 @@ class EnvConfig:
     observed_buses: tuple[int, ...]
     action_buses: tuple[int, ...]
     dt: float = 0.002
+    coarse_dt: float | None = None
+    fine_window: float = 1.0
+    coarse_sweeps: int | None = None
     agent_dt: float = 0.1
     episode: float = 10.0
     history: int = 1
@@ -124,13 +144,21 @@ class EnvConfig:
     def __post_init__(self):
         """InputError naming the field (as `key`) of a value outside its range."""
         DT.check("dt", self.dt)
-        ratio = AGENT_DT.check("agent_dt", self.agent_dt) / self.dt
-        if not (abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
-            raise InputError("agent_dt", self.agent_dt, "must be a whole number (>= 1) of "
-                             f"simulation steps dt = {self.dt} s")
-        if isinstance(self.history, bool) or not isinstance(self.history, int):
-            raise InputError("history", self.history, f"must be an integer in {HISTORY}")
-        HISTORY.check("history", self.history)
+        AGENT_DT.check("agent_dt", self.agent_dt)
+        steps = {"dt": self.dt}
+        if self.coarse_dt is not None:
+            coarse = Range(self.dt, DT.hi, "s (dt up to the largest step)")
+            coarse.check("coarse_dt", self.coarse_dt)
+            FINE_WINDOW.check("fine_window", self.fine_window)
+            if self.coarse_sweeps is not None:
+                _check_int("coarse_sweeps", self.coarse_sweeps, SWEEPS)
+            steps["coarse_dt"] = self.coarse_dt
+        for name, dt in steps.items():
+            ratio = self.agent_dt / dt
+            if not (abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
+                raise InputError("agent_dt", self.agent_dt, "must be a whole number (>= 1) "
+                                 f"of simulation steps {name} = {dt} s")
+        _check_int("history", self.history, HISTORY)
         if EPISODE.check("episode", self.episode) < self.agent_dt:
             raise InputError("episode", self.episode, f"must be >= agent_dt = {self.agent_dt} s")
         for name in ("observed_buses", "action_buses", "recovery_buses"):
@@ -143,6 +171,17 @@ class EnvConfig:
     def sim_steps(self) -> int:
         """Simulation steps per agent step."""
         return int(round(self.agent_dt / self.dt))
+
+    def in_fault_window(self, t, task: Task):
+        """() bool: the agent step that starts at t (s) overlaps [fault start, clearing +
+        fine_window), so it runs at dt rather than coarse_dt."""
+        return ((t + self.agent_dt - 0.5 * self.dt > task.fault_start)
+                & (t < task.fault_end + self.fine_window))
+
+    @property
+    def coarse_steps(self) -> int:
+        """Simulation steps per agent step at coarse_dt."""
+        return int(round(self.agent_dt / self.coarse_dt))
 
     @property
     def n_steps(self) -> int:
@@ -295,6 +334,22 @@ class LoadSheddingEnv:
                          recovery_check=check, done=jnp.zeros((), bool))
         return history.reshape(-1), state
 
+    def _advance(self, grid: GridModel, x: GridState, health: Health, t, task: Task, fault):
+        """(grid state, health) one agent step after x at t (s): sim_steps steps of dt, or,
+        with coarse_dt, those inside the fault window and coarse_steps steps of coarse_dt
+        (with coarse_sweeps network sweeps) outside it."""
+        cfg = self.config
+        if cfg.coarse_dt is None:
+            return advance(grid, x, health, t, cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
+        fine = cfg.in_fault_window(t, task)
+        coarse_grid = grid.replace(sweeps=cfg.coarse_sweeps or grid.sweeps)
+        new, residual = integrate(grid, x, health.residual, t,
+                                  jnp.where(fine, cfg.sim_steps, 0), cfg.dt, task, fault)
+        new, residual = integrate(coarse_grid, new, residual, t,
+                                  jnp.where(fine, 0, cfg.coarse_steps), cfg.coarse_dt, task,
+                                  fault)
+        return checked(x, new, health, residual, t + cfg.agent_dt, cfg.bounds)
+
     def step(self, state: EnvState, action, params: EnvParams, grid: GridModel):
         """(obs, state, reward, done, info) after one agent step with `action` (n_action,)."""
         cfg, task = self.config, state.task
@@ -305,8 +360,7 @@ class LoadSheddingEnv:
         amount = jnp.minimum(request, left)
         x = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
         fault = self._fault(grid, task)
-        x, health = advance(grid, x, state.health, state.step * cfg.sim_steps,
-                            cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
+        x, health = self._advance(grid, x, state.health, t, task, fault)
         t_next = t + cfg.agent_dt
         vm, obs = self._observe(grid, x, t_next, task, fault)
         after = t_next - task.fault_end

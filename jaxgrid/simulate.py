@@ -272,29 +272,42 @@ def initial_health(model: GridModel) -> Health:
                                  .astype(real))
 
 
-def advance(model: GridModel, x: GridState, health: Health, first_step, n: int, dt: float,
-            task: Task, fault: network.Fault, bounds: Bounds):
-    """n Heun steps from step index `first_step` (traced int); (state, health) after them.
+def integrate(model: GridModel, x: GridState, residual, t0, n, dt: float, task: Task,
+              fault: network.Fault):
+    """n Heun steps of dt seconds from time t0 (s, traced); (state, largest residual so far).
 
-    Divergence is checked once, after the n steps (an agent step or an output sample), not
-    at every step: a state that is non-finite or outside `bounds` then is discarded, the
-    rollout stays frozen at `x` (its last good checked state) and is flagged, with
-    `diverged_at` the end of these n steps.
+    n static: a `lax.scan` (differentiable); n traced (e.g. 0 or a whole agent step, chosen
+    per rollout: `LoadSheddingEnv`'s coarse step): a `lax.while_loop`, forward mode only.
     """
-    real = model.network.real_dtype
-
-    def step(carry, k):
+    def step(j, carry):
         x, residual = carry
-        new, r = heun_step(model, x, k.astype(real) * dt, dt, task, fault)
-        return (new, jnp.maximum(residual, r)), None
+        new, r = heun_step(model, x, t0 + j * dt, dt, task, fault)
+        return new, jnp.maximum(residual, r)
 
-    (new, residual), _ = jax.lax.scan(step, (x, health.residual), first_step + jnp.arange(n))
+    return jax.lax.fori_loop(0, n, step, (x, residual))
+
+
+def checked(x: GridState, new: GridState, health: Health, residual, t_end, bounds: Bounds):
+    """(state, health) after integrating from x to new: a new state that is non-finite or
+    outside `bounds` is discarded, the rollout stays frozen at x (its last good checked
+    state) and is flagged diverged at t_end (s)."""
     bad = ~within_bounds(new, bounds) & ~health.diverged
     keep = health.diverged | bad
-    t_end = (first_step + n).astype(real) * dt
     x = jax.tree.map(lambda old, nw: jnp.where(keep, old, nw), x, new)
     return x, Health(health.diverged | bad, jnp.where(bad, t_end, health.diverged_at),
                      jnp.where(keep, health.residual, residual))
+
+
+def advance(model: GridModel, x: GridState, health: Health, t0, n: int, dt: float,
+            task: Task, fault: network.Fault, bounds: Bounds):
+    """n Heun steps (static) from time t0 (s); (state, health) after them.
+
+    Divergence is checked once, after the n steps (an agent step or an output sample), not
+    at every step (`checked`).
+    """
+    new, residual = integrate(model, x, health.residual, t0, n, dt, task, fault)
+    t_end = (t0 + n * dt).astype(model.network.real_dtype)
+    return checked(x, new, health, residual, t_end, bounds)
 
 
 @partial(jax.jit, static_argnames=("n_samples", "decimation", "dt", "bounds"))
@@ -307,8 +320,8 @@ def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: f
     def sample(carry, k):
         x, h = carry
         n0 = k * decimation
-        x, h = advance(model, x, h.replace(residual=jnp.zeros((), real)), n0, decimation, dt,
-                       task, fault, bounds)
+        x, h = advance(model, x, h.replace(residual=jnp.zeros((), real)), n0.astype(real) * dt,
+                       decimation, dt, task, fault, bounds)
         t = (n0 + decimation).astype(real) * dt
         return (x, h), observe(model, x, t, dt, task, fault) + (h.residual,)
 

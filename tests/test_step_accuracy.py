@@ -12,11 +12,11 @@ from jaxgrid.study import builtin
 @pytest.fixture(scope="module")
 def report():
     return accuracy(builtin("ieee39_fidvr"), dts=(0.002, 0.005), sweeps=(1,),
-                    reference_dt=0.001, reference_sweeps=4, episode=6.0)
+                    reference_dt=0.001, reference_sweeps=4, episode=6.0, coarse_dts=(0.0, 0.01))
 
 
 def test_error_grows_with_the_step_and_the_study_step_is_accurate(report):
-    by_dt = {row["dt_s"]: row for row in report["candidates"]}
+    by_dt = {row["dt_s"]: row for row in report["candidates"] if row["coarse_dt_s"] is None}
     print("\n", {dt: (f"{r['p99_dv_pu']:.1e}", f"{r['max_dv_pu']:.1e}") for dt, r in
                  by_dt.items()})
     # Heun is second order: 2.5x the step should cost well over 2.5x the error
@@ -33,4 +33,14 @@ def test_the_recommendation_follows_the_stated_rule(report):
             if r["p99_dv_pu"] <= ACCURACY_P99 and r["changed_verdicts"] == 0
             and r["max_dv_at_check_pu"] <= ACCURACY_AT_CHECK]
     fastest = min(good, key=lambda r: r["wall_s"])
-    assert report["recommended"] == {"dt_s": fastest["dt_s"], "sweeps": fastest["sweeps"]}
+    assert report["recommended"] == {"dt_s": fastest["dt_s"], "sweeps": fastest["sweeps"],
+                                     "coarse_dt_s": fastest["coarse_dt_s"]}
+
+
+def test_a_coarse_step_outside_the_fault_window_is_used_and_costs_accuracy(report):
+    """2 ms in the fault window and 10 ms outside it: the error grows (it would not if the
+    coarse step were not taken) and the fault-window step keeps the verdicts (0 of 9 changed,
+    measured)."""
+    rows = {(r["dt_s"], r["coarse_dt_s"]): r for r in report["candidates"]}
+    assert rows[(0.002, 0.01)]["p99_dv_pu"] > 2 * rows[(0.002, None)]["p99_dv_pu"]
+    assert rows[(0.002, 0.01)]["changed_verdicts"] == 0

@@ -239,7 +239,8 @@ def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):
     write_study(pnnl39, path)
     data = tomllib.loads(path.read_text())
     assert set(data["env"]) == {f.name for f in dataclasses.fields(pnnl39.config)} - {
-        "recovery_buses"}, "None fields are left out, every other one is explicit"
+        "recovery_buses", "coarse_dt", "coarse_sweeps"}, \
+        "None fields are left out, every other one is explicit"
     assert set(data["params"]) == {f.name for f in dataclasses.fields(EnvParams)}
     assert all(p.startswith("/") for p in data["grid"]["raw"]), "absolute paths"
     assert "builtin" not in data["grid"] and len(data["grid"]["raw"]) == 3
@@ -283,6 +284,10 @@ ONE_SET = '[tasks.test]\nfault_buses = [4]\n'
     ('[env]\nagent_dt = inf\n', r"env.agent_dt = inf: must be finite, in \(0, 60\] s"),
     ('[env]\nagent_dt = nan\n', r"env.agent_dt = nan: must be finite"),
     ('[env]\nagent_dt = 0.1003\n', r"env.agent_dt = 0.1003: must be a whole number"),
+    ('[env]\ncoarse_dt = 0.03\n', r"env.agent_dt = 0.1: must be a whole number \(>= 1\) of "
+                                 r"simulation steps coarse_dt = 0.03 s"),
+    ('[env]\ncoarse_dt = 0.01\ncoarse_sweeps = 0\n', r"env.coarse_sweeps = 0: must lie in "
+                                                    r"\[1, 100\] network sweeps"),
     ('[env]\nepisode = inf\n', r"env.episode = inf: must be finite"),
     ('[env]\nhistory = 100000000000000000\n', r"env.history = 100000000000000000: must lie in "
                                              r"\[1, 1000\] observations"),
