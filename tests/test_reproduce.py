@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from types import SimpleNamespace
 
 import jax
 import numpy as np
@@ -15,7 +16,7 @@ import pytest
 
 from experiments.reproduce import claims
 from experiments.reproduce.figures import EXPERIMENTS, PAPER
-from experiments.reproduce.runs import QUICK, Runs, convergence_iteration
+from experiments.reproduce.runs import QUICK, Runs, convergence_iteration, study_key
 from experiments.reproduce.harness import main, run
 
 # The built-in 39-bus study at two load levels: trained and tested at the first, the second
@@ -205,3 +206,23 @@ def test_buses_not_recovered_and_the_best_ppo_seed():
     rows = [[{"reward_mean": -50.0}, {"reward_mean": -900.0}],
             [{"reward_mean": -800.0}, {"reward_mean": -300.0}], []]
     assert claims.best_ppo_seed(rows) == 1, "the last line counts; an empty run never wins"
+
+
+def test_a_run_folder_name_does_not_depend_on_where_the_files_lie(tmp_path):
+    """The study key hashes the input files' content, not their paths: the same files in two
+    places give one key (so a committed checkpoint resumes from any checkout); a changed
+    file gives another."""
+    from jaxgrid.study.definition import GridSource
+
+    def key(folder, raw_text):
+        folder.mkdir(exist_ok=True)
+        raw, dyr = folder / "case.raw", folder / "case.dyr"
+        raw.write_text(raw_text)
+        dyr.write_text("dynamics")
+        grid = GridSource(raw=(str(raw),), dyr=str(dyr))
+        text = f'[grid]\nraw = ["{raw}"]\ndyr = "{dyr}"\n'
+        return study_key(SimpleNamespace(definition=SimpleNamespace(grid=grid)), text)
+
+    here = key(tmp_path / "a", "network")
+    assert key(tmp_path / "b", "network") == here
+    assert key(tmp_path / "c", "network, changed") != here

@@ -96,6 +96,17 @@ def _hash(value) -> str:
     return hashlib.sha1(json.dumps(value, sort_keys=True).encode()).hexdigest()[:10]
 
 
+def study_key(study: Study, text: str) -> str:
+    """Hash of a study's resolved TOML `text` with each input file's absolute path replaced by
+    a hash of the file's content, so that a run folder's name (and a committed checkpoint)
+    does not depend on where the checkout and the case files lie."""
+    grid = study.definition.grid
+    for path in sorted({*grid.raw, *filter(None, (grid.dyr, grid.task_config,
+                                                  grid.sim_config))}, key=len, reverse=True):
+        text = text.replace(path, hashlib.sha1(Path(path).read_bytes()).hexdigest())
+    return _hash(text)
+
+
 class Runs:
     """The study of a reproduction and its cached runs under `out`/runs."""
 
@@ -106,7 +117,7 @@ class Runs:
         self.out.mkdir(parents=True, exist_ok=True)
         self.study_file = self.out / "study.toml"
         write_study(self.study, self.study_file)
-        self.study_key = _hash(self.study_file.read_text())
+        self.study_key = study_key(self.study, self.study_file.read_text())
         self.preset = paper_preset(self.study)
         self.directions = settings.directions or self.preset["directions"]
         self.trainings: set[Path] = set()  # PARS / PPO run folders used since last cleared
@@ -121,12 +132,13 @@ class Runs:
     # --- PARS ------------------------------------------------------------------------------
     def pars_config(self, policy: str, directions: int) -> tuple[TrainConfig, dict]:
         """(TrainConfig, `training_problem` arguments) of a PARS training of `policy` with
-        N = directions, b = N/2, the preset's widths and decay, the study's history for the
-        policy kind and its task sampling, `settings.seeds` seeds in one program (the
-        config's out and resume are `pars`'s)."""
+        N = directions, b = N/2, the preset's widths, decay and task batch, the study's
+        history for the policy kind and its task sampling, `settings.seeds` seeds in one
+        program (the config's out and resume are `pars`'s)."""
         s = self.settings
         pars = ParsConfig(directions=directions, top=max(1, directions // 2),
-                          decay=self.preset["decay"], tasks_per_iteration=s.tasks_per_iteration)
+                          decay=self.preset["decay"], tasks_per_iteration=s.tasks_per_iteration,
+                          task_batch=self.preset["task_batch"])
         config = TrainConfig(policy=policy, hidden=() if policy == "linear"
                              else widths(self.preset["hidden"]), pars=pars,
                              iterations=s.iterations, seeds=s.seeds)
