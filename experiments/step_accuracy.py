@@ -3,9 +3,8 @@ small-step, many-sweep reference over the study's training tasks, without contro
 
     python -m experiments.step_accuracy --study ieee39_fidvr [--dts 0.002 0.005 0.01]
         [--sweeps 2] [--coarse-dts 0 0.01] [--fine-window 1.0] [--coarse-sweeps K]
-        [--reference-dt 0.001]
-        [--reference-sweeps 4] [--reference-precision float64] [--tasks train]
-        [--episode S] [--out benchmarks/cpu/step_accuracy.json]
+        [--reference-dt 0.001] [--reference-sweeps 4] [--reference-precision float64]
+        [--tasks train] [--episode S] [--out benchmarks/cpu/step_accuracy.json]
 
 A candidate is a (step, sweeps, coarse step) triple: the coarse step (`EnvConfig.coarse_dt`,
 0 for none) is used outside the fault window, `--fine-window` s after clearing, with

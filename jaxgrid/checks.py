@@ -69,6 +69,15 @@ def check_each(key: str, values, allowed: Range) -> tuple[float, ...]:
     return tuple(allowed.check(f"{key}[{i}]", v) for i, v in enumerate(values))
 
 
+def check_int(key: str, value, allowed: Range) -> int:
+    """`value` unless it is not an int (a bool is not) inside `allowed`: InputError naming
+    `key`."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(key, value, f"must be an integer in {allowed}")
+    allowed.check(key, value)
+    return value
+
+
 def check_unique(key: str, values) -> None:
     """InputError naming `key` when an entry repeats."""
     seen = set()

@@ -35,7 +35,7 @@ from flax import struct
 from jaxgrid import network
 from jaxgrid.batching import vmap_minor
 from jaxgrid.case import VOLTAGE
-from jaxgrid.checks import InputError, Range, check_unique
+from jaxgrid.checks import InputError, Range, check_int, check_unique
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
 from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, checked, clip_closed,
@@ -100,13 +100,6 @@ FINE_WINDOW = Range(0.0, 3600.0, "s after clearing")
 SWEEPS = Range(1, 100, "network sweeps")
 
 
-def _check_int(key: str, value, allowed: Range) -> None:
-    """InputError naming `key` unless value is an int (not a bool) inside `allowed`."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(key, value, f"must be an integer in {allowed}")
-    allowed.check(key, value)
-
-
 @dataclasses.dataclass(frozen=True)
 class EnvConfig:
     """Structure of the task (static).
@@ -151,14 +144,14 @@ class EnvConfig:
             coarse.check("coarse_dt", self.coarse_dt)
             FINE_WINDOW.check("fine_window", self.fine_window)
             if self.coarse_sweeps is not None:
-                _check_int("coarse_sweeps", self.coarse_sweeps, SWEEPS)
+                check_int("coarse_sweeps", self.coarse_sweeps, SWEEPS)
             steps["coarse_dt"] = self.coarse_dt
         for name, dt in steps.items():
             ratio = self.agent_dt / dt
             if not (abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
                 raise InputError("agent_dt", self.agent_dt, "must be a whole number (>= 1) "
                                  f"of simulation steps {name} = {dt} s")
-        _check_int("history", self.history, HISTORY)
+        check_int("history", self.history, HISTORY)
         if EPISODE.check("episode", self.episode) < self.agent_dt:
             raise InputError("episode", self.episode, f"must be >= agent_dt = {self.agent_dt} s")
         for name in ("observed_buses", "action_buses", "recovery_buses"):
@@ -167,10 +160,14 @@ class EnvConfig:
         if outside:
             raise ValueError(f"recovery_buses {outside} are not observed buses")
 
+    def steps_per_agent_step(self, dt: float) -> int:
+        """Simulation steps of dt seconds in one agent step."""
+        return int(round(self.agent_dt / dt))
+
     @property
     def sim_steps(self) -> int:
         """Simulation steps per agent step."""
-        return int(round(self.agent_dt / self.dt))
+        return self.steps_per_agent_step(self.dt)
 
     def in_fault_window(self, t, task: Task):
         """() bool: the agent step that starts at t (s) overlaps [fault start, clearing +
@@ -181,7 +178,7 @@ class EnvConfig:
     @property
     def coarse_steps(self) -> int:
         """Simulation steps per agent step at coarse_dt."""
-        return int(round(self.agent_dt / self.coarse_dt))
+        return self.steps_per_agent_step(self.coarse_dt)
 
     @property
     def n_steps(self) -> int:
