@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 from types import SimpleNamespace
 
 import jax
@@ -128,6 +129,30 @@ def test_a_second_run_reuses_the_finished_runs(quick):
     assert fig6b["trained_on"] == [f"{jax.device_count()} × cpu"], "from the metrics lines"
     assert (f"its trainings took {fig6b['training_s']} s in all, on {jax.device_count()} × cpu"
             in (quick / "REPORT.md").read_text())
+
+
+def test_baselines_left_out_are_not_run_and_the_report_says_so(quick, tmp_path, capsys):
+    """--skip-baselines mpc,ppo: fig12 and fig13 compare PARS with UVLS alone, from the cached
+    runs, fig10_11 is skipped, the paper's MPC and PPO values stay beside empty cells; NOTES.md
+    ends the report."""
+    out = tmp_path / "out"
+    shutil.copytree(quick, out)
+    (out / "NOTES.md").write_text("## Notes\n\nMeasured: why.\n")
+    results = run(str(out / "study.toml"), out, ["fig10_11", "fig12", "fig13"], quick=True,
+                  skip_baselines=("mpc", "ppo"))
+    assert set(results) == {"fig12", "fig13"}, "fig10_11 needs PPO"
+    fig12 = results["fig12"]["numbers"]
+    assert "PARS better than UVLS on" in fig12 and "UVLS fails on" in fig12
+    assert not [k for k in fig12 if "MPC" in k or "PPO" in k]
+    fig13 = results["fig13"]["numbers"]
+    assert {k.split(", ")[1] for k in fig13 if k.startswith("reward, ")} == {"PARS", "UVLS"}
+    report = (out / "REPORT.md").read_text()
+    assert "left out: MPC, PPO" in report
+    assert report.endswith("## Notes\n\nMeasured: why.\n"), "the hand-written notes at its end"
+    assert "| PARS better than PPO on |  | 95.29 % |" in report, "the paper's value, ours empty"
+    assert main(["--quick", "--study", str(out / "study.toml"), "--out", str(out),
+                 "--only", "fig12", "--skip-baselines", "mpc,uvls"]) == 2
+    assert "--skip-baselines uvls: unknown; it takes mpc, ppo" in capsys.readouterr().err
 
 
 def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(tmp_path):

@@ -95,10 +95,11 @@ def mpc_row(study, options: str, batch: int, calls: int) -> dict:
             "per_decision_in_batch_us": round(1e6 * batched / batch, 1)}
 
 
-def bench_study(name: str, batch: int, calls: int, mpc: str, mpc_batch: int,
+def bench_study(name: str, batch: int, calls: int, mpc: str | None, mpc_batch: int,
                 policies: dict | None = None) -> dict:
     """Latency rows of the study `name`'s controllers: random-θ PARS policies, or the
-    trained `policies` {label: folder}, then UVLS and the MPC."""
+    trained `policies` {label: folder}, then UVLS and the MPC with options `mpc` (None: no
+    MPC row)."""
     study = load_study(name)
     rows = []
     pars = _saved_controllers(study, policies) if policies else _controllers(study)
@@ -117,9 +118,10 @@ def bench_study(name: str, batch: int, calls: int, mpc: str, mpc_batch: int,
                "per_decision_in_batch_us": round(1e6 * batched / batch, 3)}
         print(name, row, flush=True)
         rows.append(row)
-    row = mpc_row(study, mpc, mpc_batch, calls)
-    print(name, row, flush=True)
-    rows.append(row)
+    if mpc is not None:
+        row = mpc_row(study, mpc, mpc_batch, calls)
+        print(name, row, flush=True)
+        rows.append(row)
     return {"study": name, "batch": batch, "controllers": rows}
 
 

@@ -233,6 +233,14 @@ def _ppo_policy(runs: Runs) -> str:
     return runs.best_ppo(_ppo_steps(runs))
 
 
+def _baselines(runs: Runs) -> dict:
+    """{label: controller spec} of the baselines PARS is compared with: UVLS, MPC and PPO,
+    less `settings.skip_baselines` (PPO is trained here when it is needed)."""
+    skip = runs.settings.skip_baselines
+    return {"UVLS": "uvls", **({} if "mpc" in skip else {"MPC": "mpc"}),
+            **({} if "ppo" in skip else {"PPO": _ppo_policy(runs)})}
+
+
 def _ppo_steps(runs: Runs) -> int:
     """PPO environment steps: the settings', or as many as one PARS training."""
     s = runs.settings
@@ -245,8 +253,7 @@ def _ppo_steps(runs: Runs) -> int:
 def fig13(runs: Runs, path) -> dict:
     """The bus-23 case study: rewards, MW shed, who sheds least, and how many observed buses
     each controller leaves below the recovery level (the paper: five under UVLS)."""
-    controllers = {"PARS": runs.main_policy(), "MPC": "mpc", "PPO": _ppo_policy(runs),
-                   "UVLS": "uvls"}
+    controllers = {"PARS": runs.main_policy(), **_baselines(runs)}
     result = _case_study(runs, path, controllers, 23, 0.1, 33)
     level = runs.study.params.recovery_level
     for label, spec in controllers.items():
@@ -255,7 +262,14 @@ def fig13(runs: Runs, path) -> dict:
     shed = {label: result["numbers"][f"MW shed, {label}"] for label in controllers}
     result["numbers"]["sheds the least"] = ", ".join(
         label for label, mw in shed.items() if mw == min(shed.values()))  # ties: all
+    result["settings"] += _skipped(runs)
     return result
+
+
+def _skipped(runs: Runs) -> str:
+    """'; left out: MPC, PPO' for the settings line of an experiment without them."""
+    skip = runs.settings.skip_baselines
+    return f"; left out: {', '.join(b.upper() for b in skip)}" if skip else ""
 
 
 def fig10_11(runs: Runs, path) -> dict:
@@ -263,8 +277,10 @@ def fig10_11(runs: Runs, path) -> dict:
     rollouts) and PPO (`ppo_seeds` runs: mean return of the episodes each chunk ended)
     against wall time and environment steps (PARS: the agent steps its episodes simulated,
     mean over seeds; a failed episode stops early)."""
-    plt = _plt()
     s = runs.settings
+    if "ppo" in s.skip_baselines:
+        raise NotApplicable("PPO is left out (--skip-baselines)")
+    plt = _plt()
     pars = runs.pars_curves(runs.pars("lstm", runs.directions))
     ppo_rows = [metrics_rows(runs.ppo(seed, _ppo_steps(runs)) / "metrics.jsonl")
                 for seed in range(s.ppo_seeds)]
@@ -318,11 +334,11 @@ def fig12(runs: Runs, path) -> dict:
     penalty), the tasks each controller fails, PARS's mean reward against MPC's."""
     plt = _plt()
     pars = runs.evaluation(runs.main_policy())
-    others = {"UVLS": runs.evaluation("uvls"), "MPC": runs.evaluation("mpc"),
-              "PPO": runs.evaluation(_ppo_policy(runs))}
+    others = {label: runs.evaluation(spec) for label, spec in _baselines(runs).items()}
     penalty = abs(runs.study.params.unstable_penalty)
     thresholds = {"UVLS": {"more_than": penalty}, "PPO": {"less_than": penalty / 2}}
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    fig, axes = plt.subplots(1, len(others), figsize=(4.4 * len(others), 3.8), squeeze=False)
+    axes = axes[0]
     numbers = {"test tasks": len(pars["tasks"]), "M (failure penalty)": penalty}
     for ax, (label, result) in zip(axes, others.items()):
         shares = claims.difference_shares(pars, result, **thresholds.get(label, {}))
@@ -341,13 +357,15 @@ def fig12(runs: Runs, path) -> dict:
         ax.set_xlabel("reward difference per task")
     numbers["PARS fails on"] = claims.failures(pars)
     numbers["mean reward, PARS"] = round(pars["summary"]["mean_reward"], 1)
-    numbers["mean reward, PARS − MPC"] = round(numbers["mean reward, PARS"]
-                                               - numbers["mean reward, MPC"], 1)
+    if "MPC" in others:
+        numbers["mean reward, PARS − MPC"] = round(numbers["mean reward, PARS"]
+                                                   - numbers["mean reward, MPC"], 1)
     axes[0].set_ylabel("test tasks")
     _save(fig, path)
+    ppo = (f", PPO (best of {runs.settings.ppo_seeds} seeds) {others['PPO']['controller']}"
+           if "PPO" in others else "")
     return {"numbers": numbers, "settings": f"{len(pars['tasks'])} test tasks of "
-            f"{runs.study.name}; PARS {pars['controller']}, PPO (best of "
-            f"{runs.settings.ppo_seeds} seeds) {others['PPO']['controller']}"}
+            f"{runs.study.name}; PARS {pars['controller']}{ppo}{_skipped(runs)}"}
 
 
 def _trained_policies(runs: Runs) -> dict:
@@ -370,7 +388,8 @@ def tab3(runs: Runs, path) -> dict:
     plt = _plt()
     s = runs.settings
     policies = _trained_policies(runs)
-    rows = bench_study(str(runs.study_file), batch=8, calls=s.latency_calls, mpc=s.mpc,
+    mpc = None if "mpc" in s.skip_baselines else s.mpc
+    rows = bench_study(str(runs.study_file), batch=8, calls=s.latency_calls, mpc=mpc,
                        mpc_batch=2, policies=policies)["controllers"]
     fig, ax = plt.subplots(figsize=(7, 3.5))
     labels = [r["controller"] for r in rows]
@@ -380,15 +399,15 @@ def tab3(runs: Runs, path) -> dict:
     ax.set_title(f"Decision time, {runs.study.name} ({jax.devices()[0].platform})")
     _save(fig, path)
     by_label = {r["controller"]: r for r in rows}
-    lstm = next(r for r in rows if r["controller"].startswith("pars_lstm"))
-    mpc = next(r for r in rows if r["controller"].startswith("mpc"))
-    numbers = {"PARS LSTM, s per decision": float(f"{lstm['one_task_ms'] / 1e3:.3g}"),
-               "MPC, s per decision": float(f"{mpc['one_task_ms'] / 1e3:.3g}")}
+    seconds = {"PARS LSTM": next(r for r in rows if r["controller"].startswith("pars_lstm")),
+               "MPC": next((r for r in rows if r["controller"].startswith("mpc")), None)}
+    numbers = {f"{k}, s per decision": float(f"{r['one_task_ms'] / 1e3:.3g}")
+               for k, r in seconds.items() if r is not None}
     numbers.update({f"{k}, ms per decision (one task)": v["one_task_ms"]
                     for k, v in by_label.items()})
     return {"numbers": numbers, "settings": f"trained policies {policies}; one task, median "
-            f"of {s.latency_calls} calls on {jax.devices()[0].platform}; MPC options "
-            f"{s.mpc or 'defaults'}"}
+            f"of {s.latency_calls} calls on {jax.devices()[0].platform}"
+            + ("" if mpc is None else f"; MPC options {mpc or 'defaults'}") + _skipped(runs)}
 
 
 def generalisation(runs: Runs, path) -> dict:

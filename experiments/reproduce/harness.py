@@ -3,7 +3,7 @@
     python -m experiments.reproduce --study ieee39_fidvr|FILE.toml --out results/repro39 \
         [--only fig6a,fig8,...] [--quick] [--iterations N] [--seeds K] [--ppo-seeds K]
         [--directions N] [--policy DIR/policy] [--ppo-policy DIR/policy]
-        [--gpu-timing BENCH.json]
+        [--gpu-timing BENCH.json] [--skip-baselines mpc,ppo]
     python -m experiments.reproduce --study studies/ieee39_pnnl.toml --out results/pnnl39
     python -m experiments.reproduce --study studies/ieee300_pnnl.toml --out results/pnnl300
     make reproduce
@@ -22,7 +22,8 @@ configuration train as one vmapped program.
 
 Output folder: OUT/<id>.png and OUT/<id>.json (numbers, settings, wall time of this
 invocation, the trainings' wall time summed over all invocations and the devices they ran on)
-per experiment, OUT/REPORT.md (every figure; our numbers beside the paper's), OUT/policy/ (the
+per experiment, OUT/REPORT.md (every figure; our numbers beside the paper's; OUT/NOTES.md, the
+hand-written explanations, at its end), OUT/policy/ (the
 best seed of the finished main LSTM training, `experiments.evaluate --controller
 policy:OUT/policy`), OUT/runs/ (the
 trainings and evaluations, named by a hash of their inputs: reused when finished, resumed
@@ -39,7 +40,7 @@ import time
 from pathlib import Path
 
 from experiments.reproduce.figures import EXPERIMENTS, PAPER, NotApplicable
-from experiments.reproduce.runs import FULL, QUICK, Runs
+from experiments.reproduce.runs import BASELINES_SKIPPABLE, FULL, QUICK, Runs
 
 
 def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides) -> dict:
@@ -50,6 +51,10 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
         raise ValueError(f"--only {','.join(unknown)}: unknown; the experiments are "
                          f"{', '.join(EXPERIMENTS)}")
     settings = dataclasses.replace(QUICK if quick else FULL, **overrides)
+    wrong = sorted(set(settings.skip_baselines) - set(BASELINES_SKIPPABLE))
+    if wrong:
+        raise ValueError(f"--skip-baselines {','.join(wrong)}: unknown; it takes "
+                         f"{', '.join(BASELINES_SKIPPABLE)} (UVLS is always in)")
     runs = Runs(study, out, settings)
     results = {}
     for name, experiment in EXPERIMENTS.items():
@@ -78,7 +83,9 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
 
 
 def write_report(out: Path, settings, quick: bool) -> None:
-    """REPORT.md from every OUT/<id>.json there (this run's and earlier ones)."""
+    """REPORT.md from every OUT/<id>.json there (this run's and earlier ones), and OUT/NOTES.md
+    at its end when there is one: what was measured to explain the numbers, written by hand,
+    kept across runs."""
     lines = ["# PARS paper reproduction", "",
              f"Settings: {'--quick (a pipeline check, not results)' if quick else 'full'}; "
              f"{json.dumps(dataclasses.asdict(settings))}.", "",
@@ -104,6 +111,9 @@ def write_report(out: Path, settings, quick: bool) -> None:
             lines.append(f"| {key} | {_cell(result['numbers'].get(key))} | "
                          f"{_cell(paper['values'].get(key))} |")
         lines.append("")
+    notes = out / "NOTES.md"
+    if notes.is_file():
+        lines += [notes.read_text().rstrip(), ""]
     (out / "REPORT.md").write_text("\n".join(lines))
 
 
@@ -119,6 +129,11 @@ def _times(result: dict) -> str:
 
 def _cell(value) -> str:
     return "" if value is None else str(value)
+
+
+def _names(text: str) -> tuple[str, ...]:
+    """'a, b,' -> ('a', 'b')."""
+    return tuple(s.strip() for s in text.split(",") if s.strip())
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -140,13 +155,18 @@ def main(argv: list[str] | None = None) -> int:
                                         "(default: train one)")
     p.add_argument("--gpu-timing", help="an experiments.bench.train JSON measured on a GPU "
                                         "machine: fig7 adds its iteration time")
+    p.add_argument("--skip-baselines", help="comma-separated baselines to leave out of "
+                   "fig10_11, fig12, tab3 and fig13: mpc, ppo (for a machine that cannot "
+                   "afford them; the report says so)")
     args = p.parse_args(argv)
     overrides = {k: v for k, v in (("iterations", args.iterations), ("seeds", args.seeds),
                                    ("ppo_seeds", args.ppo_seeds),
                                    ("directions", args.directions), ("policy", args.policy),
                                    ("ppo_policy", args.ppo_policy),
                                    ("gpu_timing", args.gpu_timing)) if v is not None}
-    only = [s.strip() for s in args.only.split(",") if s.strip()] if args.only else None
+    if args.skip_baselines:
+        overrides["skip_baselines"] = _names(args.skip_baselines)
+    only = _names(args.only) if args.only else None
     try:
         run(args.study, args.out, only, args.quick, **overrides)
     except (ValueError, KeyError, OSError) as err:

@@ -58,6 +58,10 @@ class Settings:
         fig12 and tab3's evaluations in place of training one (None: train).
       gpu_timing: an `experiments.bench.train` JSON measured on a GPU machine; fig7 adds its
         1-device iteration time for this study and N = directions (None: none).
+      skip_baselines: of "mpc", "ppo": baselines left out of fig10_11 (skipped without PPO),
+        fig12, tab3 and fig13, for a machine that cannot afford them (on the PNNL 300-bus
+        system a PPO training at the paper's budget, or the MPC on the 170 test tasks, takes
+        many CPU hours). UVLS is always in.
     """
 
     iterations: int = 500
@@ -80,8 +84,10 @@ class Settings:
     policy: str | None = None
     ppo_policy: str | None = None
     gpu_timing: str | None = None
+    skip_baselines: tuple[str, ...] = ()
 
 
+BASELINES_SKIPPABLE = ("mpc", "ppo")
 FULL = Settings()
 QUICK = Settings(iterations=2, seeds=2, directions=2, sweep=(2, 4), sweep_large=(2, 4),
                  tasks_per_iteration=1, episode=1.5, test_tasks=2, test_durations=1,
