@@ -10,7 +10,7 @@ a grid study, `jaxgrid.rollouts.training_problem`). Output folder `TrainConfig.o
   checkpoints/    orbax checkpoints every checkpoint_every iterations and at the end
   policy/         the trained policy (`ars.checkpoint.save_policy`)
   policies/NNNNN/ the policy after iteration NNNNN, at every checkpoint
-and what `Problem.save` writes. With `seeds`, the metrics hold per-seed lists of reward_mean,
+(each policy.json records its "iteration" and the run's "iterations") and what `Problem.save` writes. With `seeds`, the metrics hold per-seed lists of reward_mean,
 reward_max and env_steps (rollouts counts one seed's) and each policy folder holds seed0/ ...
 Every process of a multi-process run computes the same replicated state; process 0 writes
 the files (orbax coordinates the checkpoints itself).
@@ -141,7 +141,7 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
                          f"{mgr.latest_step()}, past --iterations {config.iterations}")
     trainer = make_trainer(problem, config, mesh)
     run_info = {**problem.info, "config": dataclasses.asdict(config.pars),
-                "seeds": config.seeds}
+                "seeds": config.seeds, "iterations": config.iterations}
     state, log = init_state(trainer.policy, config.pars, config.seeds), []
     if config.resume:
         restored = checkpoint.restore_latest(mgr, state)
@@ -186,12 +186,13 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
             last = done == config.iterations
             checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last, step=done)
             if primary and (done % config.checkpoint_every == 0 or last):
-                save_policies(out / "policies" / f"{done:05d}", trainer.spec, state, run_info,
-                              config.seeds)
+                save_policies(out / "policies" / f"{done:05d}", trainer.spec, state,
+                              {**run_info, "iteration": done}, config.seeds)
     finally:
         bar.close()
     if primary:
-        save_policies(out / "policy", trainer.spec, state, run_info, config.seeds)
+        save_policies(out / "policy", trainer.spec, state, {**run_info, "iteration": done},
+                      config.seeds)
     return TrainResult(state, log)
 
 

@@ -18,7 +18,7 @@ import pytest
 from experiments.reproduce import claims
 from experiments.reproduce.figures import EXPERIMENTS, PAPER
 from experiments.reproduce.runs import QUICK, Runs, convergence_iteration, study_key
-from experiments.reproduce.harness import main, run
+from experiments.reproduce.harness import main, run, write_report
 
 # The built-in 39-bus study at two load levels: trained and tested at the first, the second
 # the generalisation set's (quick settings keep 2 fault buses and 1 duration of each set).
@@ -111,6 +111,24 @@ def test_generalisation_and_the_exported_policy(quick, study_file, tmp_path):
     assert evaluate(["--study", str(study_file), "--controller", f"policy:{quick / 'policy'}",
                      "--tasks", "generalisation", "--out", str(out)]) == 0
     assert json.loads(out.read_text())["summary"]["n_tasks"] == 2
+    info = json.loads((quick / "policy" / "policy.json").read_text())
+    assert (info["iteration"], info["iterations"]) == (QUICK.iterations, QUICK.iterations)
+    assert "The best seed of the main LSTM training is in `policy/`" in (
+        quick / "REPORT.md").read_text()
+
+
+def test_the_report_says_when_its_policy_is_from_an_unfinished_training(quick, tmp_path):
+    """A policy copied from a checkpoint of a training that stopped short (its policy.json:
+    iteration < iterations) is named as such at the top of the report."""
+    out = tmp_path / "out"
+    shutil.copytree(quick, out)
+    info_path = out / "policy" / "policy.json"
+    info_path.write_text(json.dumps({**json.loads(info_path.read_text()), "iteration": 120,
+                                     "iterations": 500}))
+    write_report(out, QUICK, quick=True)
+    report = (out / "REPORT.md").read_text()
+    assert "policy after iteration 120 of 500: that training is unfinished" in report
+    assert "The best seed" not in report
 
 
 def test_a_second_run_reuses_the_finished_runs(quick):

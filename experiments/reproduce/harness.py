@@ -92,9 +92,7 @@ def write_report(out: Path, settings, quick: bool) -> None:
              "Each experiment ran on the study named under it; the paper's values are for the "
              "paper's case and settings, given beside ours.", ""]
     if (out / "policy" / "policy.json").is_file():
-        lines += ["The best seed of the main LSTM training is in `policy/` (`python -m "
-                  "experiments.evaluate --controller policy:" + str(out / "policy") + " ...`).",
-                  ""]
+        lines += [_policy_line(out / "policy"), ""]
     for name in EXPERIMENTS:
         path = out / f"{name}.json"
         if not path.is_file():
@@ -115,6 +113,18 @@ def write_report(out: Path, settings, quick: bool) -> None:
     if notes.is_file():
         lines += [notes.read_text().rstrip(), ""]
     (out / "REPORT.md").write_text("\n".join(lines))
+
+
+def _policy_line(folder: Path) -> str:
+    """What OUT/policy holds: the best seed of the main LSTM training, or, when its
+    policy.json says the training stopped short, the iteration it is from."""
+    info = json.loads((folder / "policy.json").read_text())
+    use = f"(`python -m experiments.evaluate --controller policy:{folder} ...`)"
+    done, total = info.get("iteration"), info.get("iterations")
+    if done is not None and total is not None and done < total:
+        return (f"`policy/` holds the main LSTM training's policy after iteration {done} of "
+                f"{total}: that training is unfinished {use}.")
+    return f"The best seed of the main LSTM training is in `policy/` {use}."
 
 
 def _times(result: dict) -> str:
