@@ -10,7 +10,8 @@ a grid study, `jaxgrid.rollouts.training_problem`). Output folder `TrainConfig.o
   checkpoints/    orbax checkpoints every checkpoint_every iterations and at the end
   policy/         the trained policy (`ars.checkpoint.save_policy`)
   policies/NNNNN/ the policy after iteration NNNNN, at every checkpoint
-(each policy.json records its "iteration" and the run's "iterations") and what `Problem.save` writes. With `seeds`, the metrics hold per-seed lists of reward_mean,
+and what `Problem.save` writes; each policy.json records the "iteration" it is from and the
+run's "iterations". With `seeds`, the metrics hold per-seed lists of reward_mean,
 reward_max and env_steps (rollouts counts one seed's) and each policy folder holds seed0/ ...
 Every process of a multi-process run computes the same replicated state; process 0 writes
 the files (orbax coordinates the checkpoints itself).
