@@ -149,6 +149,22 @@ def test_a_second_run_reuses_the_finished_runs(quick):
             in (quick / "REPORT.md").read_text())
 
 
+def test_a_sweep_given_on_the_command_line_reuses_the_main_training(quick, tmp_path, capsys):
+    """--sweep-large N with the main policy's N: fig9 is that training's curve, nothing new
+    trains; a count below 2 is refused with the flag named."""
+    out = tmp_path / "out"
+    shutil.copytree(quick, out)
+    folders = sorted(p.name for p in (out / "runs").iterdir())
+    assert main(["--quick", "--study", str(out / "study.toml"), "--out", str(out),
+                 "--only", "fig9", "--sweep-large", str(QUICK.directions)]) == 0
+    assert sorted(p.name for p in (out / "runs").iterdir()) == folders, "nothing new ran"
+    fig9 = json.loads((out / "fig9.json").read_text())
+    assert f"N = [{QUICK.directions}]" in fig9["settings"]
+    with pytest.raises(SystemExit):
+        main(["--quick", "--out", str(out), "--only", "fig9", "--sweep-large", "1,64"])
+    assert "argument --sweep-large: '1,64'" in capsys.readouterr().err
+
+
 def test_baselines_left_out_are_not_run_and_the_report_says_so(quick, tmp_path, capsys):
     """--skip-baselines mpc,ppo: fig12 and fig13 compare PARS with UVLS alone, from the cached
     runs, fig10_11 is skipped, the paper's MPC and PPO values stay beside empty cells; NOTES.md

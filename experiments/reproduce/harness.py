@@ -146,6 +146,18 @@ def _names(text: str) -> tuple[str, ...]:
     return tuple(s.strip() for s in text.split(",") if s.strip())
 
 
+def _directions(text: str) -> tuple[int, ...]:
+    """'32, 128' -> (32, 128): direction counts N >= 2 (argparse names the flag otherwise)."""
+    try:
+        values = tuple(int(n) for n in _names(text))
+    except ValueError:
+        values = ()
+    if not values or min(values) < 2:
+        raise argparse.ArgumentTypeError(f"{text!r}: give comma-separated direction counts "
+                                         "N >= 2")
+    return values
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m experiments.reproduce",
                                 description=__doc__.split("\n")[0])
@@ -159,6 +171,10 @@ def main(argv: list[str] | None = None) -> int:
                                                   "is fig12's and fig13's)")
     p.add_argument("--directions", type=int, help="N of the main policy (default: the "
                                                    "paper's, 16 or 128 by grid size)")
+    p.add_argument("--sweep", type=_directions,
+                   help="comma-separated N of fig6b (default 8,16,32,64)")
+    p.add_argument("--sweep-large", type=_directions, help="comma-separated N of fig9 (default 32,64,128; "
+                   "the main policy's N reuses the main training)")
     p.add_argument("--policy", help="a trained PARS policy folder for fig8, fig12, fig13 "
                                     "(default: train one)")
     p.add_argument("--ppo-policy", help="a trained PPO policy folder for fig12, fig13 "
@@ -173,6 +189,7 @@ def main(argv: list[str] | None = None) -> int:
                                    ("ppo_seeds", args.ppo_seeds),
                                    ("directions", args.directions), ("policy", args.policy),
                                    ("ppo_policy", args.ppo_policy),
+                                   ("sweep", args.sweep), ("sweep_large", args.sweep_large),
                                    ("gpu_timing", args.gpu_timing)) if v is not None}
     if args.skip_baselines:
         overrides["skip_baselines"] = _names(args.skip_baselines)
