@@ -171,10 +171,11 @@ def main(argv: list[str] | None = None) -> int:
                                                   "is fig12's and fig13's)")
     p.add_argument("--directions", type=int, help="N of the main policy (default: the "
                                                    "paper's, 16 or 128 by grid size)")
-    p.add_argument("--sweep", type=_directions,
-                   help="comma-separated N of fig6b (default 8,16,32,64)")
-    p.add_argument("--sweep-large", type=_directions, help="comma-separated N of fig9 (default 32,64,128; "
-                   "the main policy's N reuses the main training)")
+    p.add_argument("--sweep", type=_directions, help="comma-separated N of fig6b (default "
+                   f"{','.join(map(str, FULL.sweep))})")
+    p.add_argument("--sweep-large", type=_directions, help="comma-separated N of fig9 (default "
+                   f"{','.join(map(str, FULL.sweep_large))}; the main policy's N reuses the "
+                   "main training)")
     p.add_argument("--policy", help="a trained PARS policy folder for fig8, fig12, fig13 "
                                     "(default: train one)")
     p.add_argument("--ppo-policy", help="a trained PPO policy folder for fig12, fig13 "
