@@ -28,6 +28,7 @@ bench:  ## benchmarks; figures go to benchmarks/cpu/*.json (GPU records: benchma
 	$(PY) -m experiments.bench.profile_step --out benchmarks/cpu/profile_step.json
 	$(PY) -m experiments.bench.vecmath --out benchmarks/cpu/vecmath.json
 	$(PY) -m experiments.bench.speedup --rounds 1 --out benchmarks/cpu/speedup.json
+	$(PY) -m experiments.bench.iterations --out benchmarks/cpu/iterations.json
 	$(PY) -m experiments.bench.scale --out benchmarks/cpu/scale.json
 
 reproduce:  ## the paper's 39-bus figures and tables, REPORT.md in results/reproduce39

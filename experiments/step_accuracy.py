@@ -3,12 +3,14 @@ small-step, many-sweep reference over the study's training tasks, without contro
 
     python -m experiments.step_accuracy --study ieee39_fidvr [--dts 0.002 0.005 0.01]
         [--sweeps 2] [--coarse-dts 0 0.01] [--fine-window 1.0] [--coarse-sweeps K]
-        [--reference-dt 0.001] [--reference-sweeps 4] [--reference-precision float64]
-        [--tasks train] [--episode S] [--out benchmarks/cpu/step_accuracy.json]
+        [--coarse-load-substeps N] [--reference-dt 0.001] [--reference-sweeps 4]
+        [--reference-precision float64] [--tasks train] [--episode S]
+        [--out benchmarks/cpu/step_accuracy.json]
 
 A candidate is a (step, sweeps, coarse step) triple: the coarse step (`EnvConfig.coarse_dt`,
 0 for none) is used outside the fault window, `--fine-window` s after clearing, with
-`--coarse-sweeps` network sweeps (default: the candidate's).
+`--coarse-sweeps` network sweeps (default: the candidate's) and `--coarse-load-substeps`
+sub-steps of the load models (`EnvConfig.coarse_load_substeps`).
 
 For each candidate it reports, over every task and agent step (0.1 s samples of the observed
 bus voltages, float32 time loop as in training): the 99th-percentile and largest |ΔV|
@@ -41,11 +43,12 @@ ACCURACY_AT_CHECK = 5e-3  # p.u.: its largest |ΔV| at the recovery check
 
 
 def run(study: Study, dt: float, episode: float, tasks: str, coarse_dt: float | None = None,
-        fine_window: float = 1.0, coarse_sweeps: int | None = None):
+        fine_window: float = 1.0, coarse_sweeps: int | None = None,
+        coarse_load_substeps: int | None = None):
     """(vm (n_task, n_steps, n_observed), recovered (n_task,), warm wall time s) without
     control at step dt (coarse_dt outside the fault window, None: dt throughout)."""
     env = study.env(dt=dt, episode=episode, coarse_dt=coarse_dt, fine_window=fine_window,
-                    coarse_sweeps=coarse_sweeps)
+                    coarse_sweeps=coarse_sweeps, coarse_load_substeps=coarse_load_substeps)
     apply, params, carry = no_control(env)
     specs = study.tasks(tasks)
     rollout_specs(study, env, apply, params, specs, carry, trace=True)  # compile
@@ -65,7 +68,7 @@ def check_index(study: Study, tasks: str, agent_dt: float, n_steps: int) -> np.n
 def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: int,
              tasks: str = "train", episode: float | None = None, coarse_dts=(0.0,),
              fine_window: float = 1.0, coarse_sweeps: int | None = None,
-             reference_precision: str = "float64") -> dict:
+             coarse_load_substeps: int | None = None, reference_precision: str = "float64") -> dict:
     """The report of the module docstring as a dict; a coarse step of 0 means none."""
     episode = episode or study.config.episode
     reference = rebuild(study, precision=reference_precision, sweeps=reference_sweeps)
@@ -78,7 +81,7 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
             if coarse and coarse <= dt:
                 continue
             vm, ok, wall = run(candidate_study, dt, episode, tasks, coarse or None, fine_window,
-                               coarse_sweeps)
+                               coarse_sweeps, coarse_load_substeps)
             error = np.abs(vm - vm_ref)
             at_check = error[np.arange(len(check)), check]
             rows.append({"dt_s": dt, "sweeps": n_sweeps, "coarse_dt_s": coarse or None,
@@ -100,6 +103,7 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
             "study_step": {"dt_s": study.config.dt, "sweeps": study.definition.compile.sweeps,
                            "coarse_dt_s": study.config.coarse_dt},
             "fine_window_s": fine_window, "coarse_sweeps": coarse_sweeps,
+            "coarse_load_substeps": coarse_load_substeps,
             "candidates": rows,
             "recommended": best and {k: best[k] for k in ("dt_s", "sweeps", "coarse_dt_s")}}
 
@@ -116,6 +120,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fine-window", type=float, default=1.0,
                    help="s after clearing at the fine step (with a coarse step)")
     p.add_argument("--coarse-sweeps", type=int, help="network sweeps at the coarse step")
+    p.add_argument("--coarse-load-substeps", type=int,
+                   help="load-model sub-steps per coarse step (default 1)")
     p.add_argument("--reference-dt", type=float, default=0.001, help="s (default 1 ms)")
     p.add_argument("--reference-sweeps", type=int, default=4)
     p.add_argument("--reference-precision", choices=("float64", "float32"), default="float64")
@@ -127,7 +133,8 @@ def main(argv: list[str] | None = None) -> int:
         study = study_from_args(args)
         report = accuracy(study, args.dts, args.sweeps, args.reference_dt,
                           args.reference_sweeps, args.tasks, args.episode, args.coarse_dts,
-                          args.fine_window, args.coarse_sweeps, args.reference_precision)
+                          args.fine_window, args.coarse_sweeps, args.coarse_load_substeps,
+                          args.reference_precision)
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -98,6 +98,7 @@ EPISODE = Range(0.0, 3600.0, "s", lo_open=True)
 HISTORY = Range(1, 1000, "observations")
 FINE_WINDOW = Range(0.0, 3600.0, "s after clearing")
 SWEEPS = Range(1, 100, "network sweeps")
+SUBSTEPS = Range(1, 100, "load-model sub-steps")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,6 +114,9 @@ class EnvConfig:
         it). Its accuracy is measured like dt's (`experiments.step_accuracy`).
       fine_window: s after clearing that the step stays dt (used with coarse_dt).
       coarse_sweeps: network sweeps per solution at coarse_dt (None: the model's).
+      coarse_load_substeps: sub-steps of the load models' states per step at coarse_dt
+        (None: the model's `load_substeps`; `jaxgrid.dynamics.substepped_loads`): the
+        composite loads' motors then limit the coarse step by accuracy, not stability.
       agent_dt: control step, s.  episode: length, s.
       history: number of last observations stacked (1: just the current one).
       include_action_status: the observation ends with the connected load fraction at the
@@ -127,6 +131,7 @@ class EnvConfig:
     coarse_dt: float | None = None
     fine_window: float = 1.0
     coarse_sweeps: int | None = None
+    coarse_load_substeps: int | None = None
     agent_dt: float = 0.1
     episode: float = 10.0
     history: int = 1
@@ -145,6 +150,8 @@ class EnvConfig:
             FINE_WINDOW.check("fine_window", self.fine_window)
             if self.coarse_sweeps is not None:
                 check_int("coarse_sweeps", self.coarse_sweeps, SWEEPS)
+            if self.coarse_load_substeps is not None:
+                check_int("coarse_load_substeps", self.coarse_load_substeps, SUBSTEPS)
             steps["coarse_dt"] = self.coarse_dt
         for name, dt in steps.items():
             ratio = self.agent_dt / dt
@@ -334,12 +341,13 @@ class LoadSheddingEnv:
     def _advance(self, grid: GridModel, x: GridState, health: Health, t, task: Task, fault):
         """(grid state, health) one agent step after x at t (s): sim_steps steps of dt, or,
         with coarse_dt, those inside the fault window and coarse_steps steps of coarse_dt
-        (with coarse_sweeps network sweeps) outside it."""
+        (with coarse_sweeps network sweeps and coarse_load_substeps) outside it."""
         cfg = self.config
         if cfg.coarse_dt is None:
             return advance(grid, x, health, t, cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
         fine = cfg.in_fault_window(t, task)
-        coarse_grid = grid.replace(sweeps=cfg.coarse_sweeps or grid.sweeps)
+        coarse_grid = grid.replace(sweeps=cfg.coarse_sweeps or grid.sweeps,
+                                   load_substeps=cfg.coarse_load_substeps or grid.load_substeps)
         new, residual = integrate(grid, x, health.residual, t,
                                   jnp.where(fine, cfg.sim_steps, 0), cfg.dt, task, fault)
         new, residual = integrate(coarse_grid, new, residual, t,
