@@ -4,9 +4,11 @@ One jit-compiled function does a whole iteration:
   1. sample N directions δ ~ N(0, I) over the flat policy vector θ;
   2. build the 2N vectors θ ± ν·δ and pick m tasks (the same for every direction and sign,
      so r+ − r− measures the perturbation alone), uniformly or by a given sampler;
-  3. roll out all 2N·m (θ, task) pairs as a vmap over the 2N vectors (sharded over a 1-D
-     device mesh, `jax.sharding`) of a vmap over the m tasks: a task's data (its grid
-     model) is shared by its 2N rollouts and each vector by its m rollouts, so the policy
+  3. roll out all 2N·m (θ, task) pairs as a vmap over the 2N vectors (split over a 1-D
+     device mesh by `jax.shard_map`: each device runs its share of the vectors on its own,
+     so a loop that stops once its batch is done waits for the device's own rollouts, with
+     no cross-device reduction per step) of a vmap over the m tasks: a task's data (its
+     grid model) is shared by its 2N rollouts and each vector by its m rollouts, so the policy
      runs as 2N batched products over the tasks; observations normalised by the frozen
      running stats. Both vmaps are passed in (`Vmaps`, default `jax.vmap`); a grid passes
      `jaxgrid.batching.vmap_minor`, which keeps the batch as every array's last axis (the
@@ -227,12 +229,18 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
         picked = jax.tree.map(lambda a: a[chosen], tasks)
         mean, std = state.stats.mean, state.stats.std
 
-        def per_batch(batch):  # (c, ...) tasks -> (2N, c, ...) episode results
-            return vmaps.thetas(lambda theta: vmaps.tasks(
-                lambda task: episode(apply, (theta, mean, std), task, carry0, data))(batch))(
-                    thetas)
+        def rollouts(thetas, picked, mean, std, data):  # one device's share of the thetas
+            def per_batch(batch):  # (c, ...) tasks -> (2N/devices, c, ...) episode results
+                return vmaps.thetas(lambda theta: vmaps.tasks(
+                    lambda task: episode(apply, (theta, mean, std), task, carry0, data))(
+                        batch))(thetas)
 
-        out = _in_batches(per_batch, picked, config.task_batch or m)  # (2N, m, ...)
+            return _in_batches(per_batch, picked, config.task_batch or m)
+
+        local = jax.shard_map(rollouts, mesh=mesh, in_specs=(PartitionSpec("batch"),) +
+                              (PartitionSpec(),) * 4, out_specs=PartitionSpec("batch"),
+                              check_vma=False)
+        out = local(thetas, picked, mean, std, data)  # (2N, m, ...)
         returns = clean_returns(out["reward"].mean(axis=1))
         r_plus, r_minus = returns[:n_dir], returns[n_dir:]
         theta, _ = ars_update(state.theta, delta, r_plus, r_minus, config.top, state.step_size)

@@ -338,20 +338,26 @@ class LoadSheddingEnv:
                          recovery_check=check, done=jnp.zeros((), bool))
         return history.reshape(-1), state
 
-    def _advance(self, grid: GridModel, x: GridState, health: Health, t, task: Task, fault):
+    def _advance(self, grid: GridModel, x: GridState, health: Health, t, task: Task, fault,
+                 done):
         """(grid state, health) one agent step after x at t (s): sim_steps steps of dt, or,
         with coarse_dt, those inside the fault window and coarse_steps steps of coarse_dt
-        (with coarse_sweeps network sweeps and coarse_load_substeps) outside it."""
+        (with coarse_sweeps network sweeps and coarse_load_substeps) outside it.
+
+        With coarse_dt, a finished episode (`done`, () bool) takes no steps: vmapped, the two
+        step loops run as long as their longest member, and an episode frozen inside the fault
+        window would otherwise keep the fine loop running for the whole batch."""
         cfg = self.config
         if cfg.coarse_dt is None:
             return advance(grid, x, health, t, cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
-        fine = cfg.in_fault_window(t, task)
+        fine = cfg.in_fault_window(t, task) & ~done
+        coarse = ~cfg.in_fault_window(t, task) & ~done
         coarse_grid = grid.replace(sweeps=cfg.coarse_sweeps or grid.sweeps,
                                    load_substeps=cfg.coarse_load_substeps or grid.load_substeps)
         new, residual = integrate(grid, x, health.residual, t,
                                   jnp.where(fine, cfg.sim_steps, 0), cfg.dt, task, fault)
         new, residual = integrate(coarse_grid, new, residual, t,
-                                  jnp.where(fine, 0, cfg.coarse_steps), cfg.coarse_dt, task,
+                                  jnp.where(coarse, cfg.coarse_steps, 0), cfg.coarse_dt, task,
                                   fault)
         return checked(x, new, health, residual, t + cfg.agent_dt, cfg.bounds)
 
@@ -365,7 +371,7 @@ class LoadSheddingEnv:
         amount = jnp.minimum(request, left)
         x = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
         fault = self._fault(grid, task)
-        x, health = self._advance(grid, x, state.health, t, task, fault)
+        x, health = self._advance(grid, x, state.health, t, task, fault, state.done)
         t_next = t + cfg.agent_dt
         vm, obs = self._observe(grid, x, t_next, task, fault)
         after = t_next - task.fault_end

@@ -196,6 +196,22 @@ def test_coarse_step_is_used_outside_the_fault_window(study, tasks):
         assert bool(env.config.in_fault_window(jnp.asarray(t, jnp.float32), fault)) == fine, t
 
 
+def test_a_finished_episode_takes_no_coarse_or_fine_steps(study, grid, tasks):
+    """With coarse_dt, a state already done stays where it is: vmapped, the step loops run as
+    long as their longest member, so a finished episode must not keep them running."""
+    env = study.env(episode=6.0, coarse_dt=0.02, fine_window=1.0)
+    params = EnvParams()
+    _, state = env.reset(None, tasks[2], params, grid)
+    state = state.replace(step=jnp.asarray(10, jnp.int32))  # 1.0 s: inside the fault window
+    step = jax.jit(lambda s, g: env.step(s, jnp.zeros(len(env.action_slots)), params, g)[1])
+    for done in (False, True):
+        new = step(state.replace(done=jnp.asarray(done)), grid)
+        moved = max(float(jnp.max(jnp.abs(a - b))) for a, b in
+                    zip(jax.tree.leaves(new.grid.integrated()),
+                        jax.tree.leaves(state.grid.integrated())))
+        assert (moved == 0.0) == done, (done, moved)
+
+
 @pytest.mark.parametrize("changes, message", [
     ({"coarse_dt": 0.001}, r"coarse_dt = 0.001: must lie in \[0.002, 0.05\] s"),
     ({"coarse_dt": 0.03}, r"agent_dt = 0.1: must be a whole number \(>= 1\) of simulation "
