@@ -350,8 +350,8 @@ class LoadSheddingEnv:
         cfg = self.config
         if cfg.coarse_dt is None:
             return advance(grid, x, health, t, cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
-        fine = cfg.in_fault_window(t, task) & ~done
-        coarse = ~cfg.in_fault_window(t, task) & ~done
+        window = cfg.in_fault_window(t, task)
+        fine, coarse = window & ~done, ~window & ~done
         coarse_grid = grid.replace(sweeps=cfg.coarse_sweeps or grid.sweeps,
                                    load_substeps=cfg.coarse_load_substeps or grid.load_substeps)
         new, residual = integrate(grid, x, health.residual, t,
