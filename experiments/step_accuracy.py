@@ -20,7 +20,14 @@ and the wall time of the warm run with its ratio to the study's own step. The st
 study should use is the fastest candidate with p99 |ΔV| <= 1e-3 p.u. (`ACCURACY_P99`), no
 changed verdict and at most 5e-3 p.u. at the recovery check (`ACCURACY_AT_CHECK`: the
 verdict compares that voltage with 0.95 p.u., so a larger error there can flip verdicts of
-tasks this set does not hold); the command names it.
+tasks this set does not hold), and no diverged episode under random shedding; the command
+names it.
+
+Uncontrolled runs never shed, and shedding can make a step unstable that is stable without
+it (measured on the PNNL 300-bus study: docs/studies.md, "A coarse step with load
+sub-steps"). So each candidate that passes the accuracy rule also runs `--stress-rollouts`
+episodes (default 64; 0: none) of random shedding on the training task with the longest
+fault (`shedding_stress`), and is recommended only if none of them diverges.
 """
 from __future__ import annotations
 
@@ -31,6 +38,8 @@ import sys
 import time
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from baselines.controllers import no_control
@@ -40,6 +49,7 @@ from jaxgrid.study import Study, rebuild
 
 ACCURACY_P99 = 1e-3  # p.u.: the largest p99 |ΔV| a study's default step may have
 ACCURACY_AT_CHECK = 5e-3  # p.u.: its largest |ΔV| at the recovery check
+STRESS_SHARE = 0.15  # share of the action buses that shed at each agent step under stress
 
 
 def run(study: Study, dt: float, episode: float, tasks: str, coarse_dt: float | None = None,
@@ -57,6 +67,40 @@ def run(study: Study, dt: float, episode: float, tasks: str, coarse_dt: float | 
     return out["vm"], out["recovered"], time.perf_counter() - start
 
 
+def stress_task(study: Study):
+    """The training task with the longest fault (the first such) at operating point 0."""
+    specs = [s for s in study.tasks("train") if s.operating_point == 0]
+    return max(specs, key=lambda s: s.fault_duration)
+
+
+def shedding_stress(study: Study, env, rollouts: int, seed: int = 0) -> dict:
+    """Random open-loop shedding on `stress_task`: at every agent step each action bus sheds,
+    with probability STRESS_SHARE, a uniform draw from the action range (a perturbed policy
+    at its worst: most of the action buses' load is gone well before the episode ends).
+    Returns {"diverged": episodes of `rollouts` flagged diverged (`Health.diverged`),
+    "shed_share": mean shed power over the action buses' initial load}."""
+    grid, params = study.point(0), study.params
+    task = jax.tree.map(lambda a: a[0], study.batch([stress_task(study)]).task)
+    low, high = float(params.action_low), float(params.action_high)
+    shape = (rollouts, env.config.n_steps, len(env.action_slots))
+    draw, share = jax.random.split(jax.random.PRNGKey(seed))
+    tables = jnp.where(jax.random.uniform(share, shape) < STRESS_SHARE,
+                       jax.random.uniform(draw, shape, minval=low, maxval=high), high)
+
+    def replay(table, obs, k):  # policy_apply: the table's row for agent step k
+        return table[k], k + 1
+
+    def episodes(tables, grid, task, params):
+        return jax.vmap(lambda table: env.episode(replay, table, task, params, grid,
+                                                  jnp.zeros((), jnp.int32)))(tables)
+
+    with jax.enable_x64(env.precision == "float64"):
+        out = jax.jit(episodes)(tables, grid, task, params)
+    p0 = float(np.sum(np.asarray(grid.load_p0)[env.action_slots]))
+    return {"diverged": int(np.sum(out["diverged"])),
+            "shed_share": float(np.mean(out["shed_pu"])) / p0}
+
+
 def check_index(study: Study, tasks: str, agent_dt: float, n_steps: int) -> np.ndarray:
     """(n_task,) index of the first agent-step sample at or after the recovery check."""
     specs = study.tasks(tasks)
@@ -68,7 +112,8 @@ def check_index(study: Study, tasks: str, agent_dt: float, n_steps: int) -> np.n
 def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: int,
              tasks: str = "train", episode: float | None = None, coarse_dts=(0.0,),
              fine_window: float = 1.0, coarse_sweeps: int | None = None,
-             coarse_load_substeps: int | None = None, reference_precision: str = "float64") -> dict:
+             coarse_load_substeps: int | None = None, reference_precision: str = "float64",
+             stress_rollouts: int = 64) -> dict:
     """The report of the module docstring as a dict; a coarse step of 0 means none."""
     episode = episode or study.config.episode
     reference = rebuild(study, precision=reference_precision, sweeps=reference_sweeps)
@@ -84,18 +129,26 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
                                coarse_sweeps, coarse_load_substeps)
             error = np.abs(vm - vm_ref)
             at_check = error[np.arange(len(check)), check]
-            rows.append({"dt_s": dt, "sweeps": n_sweeps, "coarse_dt_s": coarse or None,
-                         "p99_dv_pu": float(np.percentile(error, 99)),
-                         "max_dv_pu": float(error.max()),
-                         "max_dv_at_check_pu": float(at_check.max()),
-                         "changed_verdicts": int(np.sum(ok != ok_ref)), "wall_s": wall})
+            row = {"dt_s": dt, "sweeps": n_sweeps, "coarse_dt_s": coarse or None,
+                   "p99_dv_pu": float(np.percentile(error, 99)),
+                   "max_dv_pu": float(error.max()),
+                   "max_dv_at_check_pu": float(at_check.max()),
+                   "changed_verdicts": int(np.sum(ok != ok_ref)), "wall_s": wall,
+                   "diverged_under_shedding": None, "stress_shed_share": None}
+            if stress_rollouts and accurate(row):
+                env = candidate_study.env(dt=dt, episode=episode, coarse_dt=coarse or None,
+                                          fine_window=fine_window, coarse_sweeps=coarse_sweeps,
+                                          coarse_load_substeps=coarse_load_substeps)
+                stress = shedding_stress(candidate_study, env, stress_rollouts)
+                row["diverged_under_shedding"] = stress["diverged"]
+                row["stress_shed_share"] = stress["shed_share"]
+            rows.append(row)
     own = [r for r in rows if r["dt_s"] == study.config.dt
            and r["sweeps"] == study.definition.compile.sweeps
            and r["coarse_dt_s"] == study.config.coarse_dt]
     for row in rows:
         row["time_ratio_to_study_step"] = row["wall_s"] / own[0]["wall_s"] if own else None
-    good = [r for r in rows if r["p99_dv_pu"] <= ACCURACY_P99 and r["changed_verdicts"] == 0
-            and r["max_dv_at_check_pu"] <= ACCURACY_AT_CHECK]
+    good = [r for r in rows if accurate(r) and not r["diverged_under_shedding"]]
     best = min(good, key=lambda r: r["wall_s"]) if good else None
     return {"study": study.name, "tasks": tasks, "n_tasks": len(ok_ref), "episode_s": episode,
             "reference": {"dt_s": reference_dt, "sweeps": reference_sweeps,
@@ -104,8 +157,16 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
                            "coarse_dt_s": study.config.coarse_dt},
             "fine_window_s": fine_window, "coarse_sweeps": coarse_sweeps,
             "coarse_load_substeps": coarse_load_substeps,
+            "stress": {"rollouts": stress_rollouts, "share": STRESS_SHARE,
+                       "task": str(stress_task(study))},
             "candidates": rows,
             "recommended": best and {k: best[k] for k in ("dt_s", "sweeps", "coarse_dt_s")}}
+
+
+def accurate(row: dict) -> bool:
+    """The accuracy rule of the module docstring (without the shedding stress)."""
+    return (row["p99_dv_pu"] <= ACCURACY_P99 and row["changed_verdicts"] == 0
+            and row["max_dv_at_check_pu"] <= ACCURACY_AT_CHECK)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -127,6 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--reference-precision", choices=("float64", "float32"), default="float64")
     p.add_argument("--tasks", default="train", help="the study's task set")
     p.add_argument("--episode", type=float, help="s (default: the study's)")
+    p.add_argument("--stress-rollouts", type=int, default=64,
+                   help="random-shedding episodes per accurate candidate (0: none)")
     p.add_argument("--out", default="benchmarks/cpu/step_accuracy.json")
     args = p.parse_args(argv)
     try:
@@ -134,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         report = accuracy(study, args.dts, args.sweeps, args.reference_dt,
                           args.reference_sweeps, args.tasks, args.episode, args.coarse_dts,
                           args.fine_window, args.coarse_sweeps, args.coarse_load_substeps,
-                          args.reference_precision)
+                          args.reference_precision, args.stress_rollouts)
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -143,13 +206,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"dt {row['dt_s'] * 1000:g} ms{coarse}, {row['sweeps']} sweeps: p99 |dV| "
               f"{row['p99_dv_pu']:.2e}, max {row['max_dv_pu']:.2e}, at the check "
               f"{row['max_dv_at_check_pu']:.2e} p.u.; {row['changed_verdicts']} changed "
-              f"verdicts of {report['n_tasks']}; {row['wall_s']:.2f} s")
+              f"verdicts of {report['n_tasks']}; {row['wall_s']:.2f} s{stressed(row)}")
     print(f"{report['study']}: recommended {report['recommended']} (p99 |dV| <= "
           f"{ACCURACY_P99:g} p.u., <= {ACCURACY_AT_CHECK:g} p.u. at the check, no changed "
-          "verdict)")
+          "verdict, none diverged under shedding)")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(report, indent=1))
     return 0
+
+
+def stressed(row: dict) -> str:
+    """The shedding-stress part of a candidate's line ('' if it did not run)."""
+    if row["diverged_under_shedding"] is None:
+        return ""
+    return (f"; under random shedding ({row['stress_shed_share']:.0%} of the action buses' "
+            f"load) {row['diverged_under_shedding']} diverged")
 
 
 if __name__ == "__main__":

@@ -5,14 +5,15 @@ from __future__ import annotations
 
 import pytest
 
-from experiments.step_accuracy import ACCURACY_AT_CHECK, ACCURACY_P99, accuracy
+from experiments.step_accuracy import ACCURACY_AT_CHECK, ACCURACY_P99, accuracy, accurate
 from jaxgrid.study import builtin
 
 
 @pytest.fixture(scope="module")
 def report():
     return accuracy(builtin("ieee39_fidvr"), dts=(0.002, 0.005), sweeps=(1,),
-                    reference_dt=0.001, reference_sweeps=4, episode=6.0, coarse_dts=(0.0, 0.01))
+                    reference_dt=0.001, reference_sweeps=4, episode=6.0, coarse_dts=(0.0, 0.01),
+                    stress_rollouts=8)
 
 
 def test_error_grows_with_the_step_and_the_study_step_is_accurate(report):
@@ -31,7 +32,8 @@ def test_error_grows_with_the_step_and_the_study_step_is_accurate(report):
 def test_the_recommendation_follows_the_stated_rule(report):
     good = [r for r in report["candidates"]
             if r["p99_dv_pu"] <= ACCURACY_P99 and r["changed_verdicts"] == 0
-            and r["max_dv_at_check_pu"] <= ACCURACY_AT_CHECK]
+            and r["max_dv_at_check_pu"] <= ACCURACY_AT_CHECK
+            and not r["diverged_under_shedding"]]
     fastest = min(good, key=lambda r: r["wall_s"])
     assert report["recommended"] == {"dt_s": fastest["dt_s"], "sweeps": fastest["sweeps"],
                                      "coarse_dt_s": fastest["coarse_dt_s"]}
@@ -44,3 +46,20 @@ def test_a_coarse_step_outside_the_fault_window_is_used_and_costs_accuracy(repor
     rows = {(r["dt_s"], r["coarse_dt_s"]): r for r in report["candidates"]}
     assert rows[(0.002, 0.01)]["p99_dv_pu"] > 2 * rows[(0.002, None)]["p99_dv_pu"]
     assert rows[(0.002, 0.01)]["changed_verdicts"] == 0
+
+
+def test_accurate_candidates_are_stressed_by_random_shedding(report):
+    """Each candidate that passes the accuracy rule also runs random-shedding episodes
+    (`shedding_stress`): they shed most of the action buses' load (STRESS_SHARE of the buses
+    per agent step), and at the study's own 2-ms step none diverges. The stress catches what
+    uncontrolled runs cannot: on the PNNL 300-bus study, 46 of 64 episodes diverge at 25 ms
+    with 2 load sub-steps and none at 10 ms (docs/studies.md)."""
+    rows = {(r["dt_s"], r["coarse_dt_s"]): r for r in report["candidates"]}
+    for row in rows.values():
+        assert (row["diverged_under_shedding"] is None) == (not accurate(row))
+    own = rows[(0.002, None)]
+    print("\n", {k: (r["diverged_under_shedding"], r["stress_shed_share"])
+                 for k, r in rows.items()})
+    assert own["diverged_under_shedding"] == 0
+    assert own["stress_shed_share"] > 0.3
+    assert report["stress"]["rollouts"] == 8
