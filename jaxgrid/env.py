@@ -404,8 +404,9 @@ class LoadSheddingEnv:
 
         policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
         initial policy state (None for feed-forward policies). A `Planner` (e.g. the MPC)
-        is called with a fourth argument, `PlanInputs`. After `done` the reward stops and
-        the policy state is held; without `trace` (and for policies, not planners) the
+        is called with a fourth argument, `PlanInputs`. The policy state keeps the dtypes of
+        `policy_carry` (a saved float32 policy runs in a float64 study). After `done` the
+        reward stops and the policy state is held; without `trace` (and for policies, not planners) the
         episode loop stops there, so a batch of episodes (vmapped) costs nothing more once
         all of them are done. Returns {"reward", "shed_pu", "recovered",
         "steps" (agent steps taken), "diverged", "policy_carry" (final)}; with `trace`
@@ -421,8 +422,9 @@ class LoadSheddingEnv:
             inputs = (PlanInputs(state, grid, params, k),) if isinstance(policy_apply,
                                                                         Planner) else ()
             action, new_policy_state = policy_apply(policy_params, obs, policy_state, *inputs)
-            policy_state = jax.tree.map(lambda a, b: jnp.where(live, a, b), new_policy_state,
-                                        policy_state)
+            # the policy's state keeps its dtype (a float32 policy in a float64 simulation)
+            policy_state = jax.tree.map(lambda a, b: jnp.where(live, a, b).astype(b.dtype),
+                                        new_policy_state, policy_state)
             obs, new, reward, _, info = self.step(state, action, params, grid)
             new = jax.tree.map(lambda a, b: jnp.where(live, a, b), new, state)
             total = total + jnp.where(live, reward, 0.0)

@@ -237,3 +237,24 @@ def test_coarse_step_keeps_the_verdicts_and_rewards(episodes, study, grid, tasks
     np.testing.assert_array_equal(np.asarray(coarse["recovered"]), np.asarray(fine["recovered"]))
     np.testing.assert_allclose(np.asarray(coarse["reward"]), np.asarray(fine["reward"]),
                                rtol=0.02, atol=0.5)
+
+
+def test_a_float32_policy_state_runs_in_a_float64_study(study):
+    """A saved policy's LSTM state is float32; in a float64 study (`[compile] precision`) its
+    update is promoted to float64, and the episode loop must keep the state's dtype."""
+    from jaxgrid.rollouts import rollout_specs
+    from jaxgrid.study.build import rebuild
+    from jaxgrid.tasks import TaskSpec
+
+    study64 = rebuild(study, precision="float64")
+    env = study64.env(episode=0.3)
+    n_action = len(env.action_slots)
+
+    def apply(params, obs, carry):  # counts the observations' sum in its state
+        return jnp.zeros(n_action, obs.dtype), carry + jnp.sum(obs)
+
+    _, out = rollout_specs(study64, env, apply, None, [TaskSpec(4, 0.0)],
+                           jnp.zeros((), jnp.float32))
+    assert out["policy_carry"].dtype == np.float32
+    assert np.isfinite(out["policy_carry"]).all() and out["policy_carry"][0] != 0.0
+    assert out["steps"][0] == 3 and out["recovered"][0]

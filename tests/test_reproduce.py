@@ -87,7 +87,8 @@ def test_every_experiment_writes_its_figure_numbers_and_report_entry(quick):
 
 def test_training_counts_the_environment_steps_it_simulated(quick):
     """metrics.jsonl's env_steps: per seed, cumulative, at most 15 agent steps (1.5 s) per
-    rollout; fig11's PARS steps are their mean over the seeds."""
+    rollout; fig11's PARS steps are their mean over the seeds, and fig10's PARS wall time is
+    the program's over its seeds (PPO's is per seed)."""
     rows = [json.loads(line) for line in next((quick / "runs").glob("pars_lstm_N2-*"))
             .joinpath("metrics.jsonl").read_text().splitlines()]
     steps = np.array([r["env_steps"] for r in rows])  # (iterations, seeds)
@@ -95,6 +96,8 @@ def test_training_counts_the_environment_steps_it_simulated(quick):
     assert np.all(steps[-1] <= rows[-1]["rollouts"] * 15)
     fig10 = json.loads((quick / "fig10_11.json").read_text())["numbers"]
     assert fig10["environment steps, PARS (mean over seeds)"] == int(steps[-1].mean())
+    program_s = sum(r["wall_s"] for r in rows)
+    assert fig10["wall s in all, PARS"] == pytest.approx(program_s / QUICK.seeds, abs=0.051)
 
 
 def test_generalisation_and_the_exported_policy(quick, study_file, tmp_path):

@@ -275,8 +275,10 @@ def _skipped(runs: Runs) -> str:
 def fig10_11(runs: Runs, path) -> dict:
     """Training reward of PARS (the main LSTM run, every seed: mean over its perturbed
     rollouts) and PPO (`ppo_seeds` runs: mean return of the episodes each chunk ended)
-    against wall time and environment steps (PARS: the agent steps its episodes simulated,
-    mean over seeds; a failed episode stops early)."""
+    against wall time per seed and environment steps (PARS: the agent steps its episodes
+    simulated, mean over seeds; a failed episode stops early). PARS's seeds train together in
+    one program, PPO's one after another: a PARS seed's wall time is the program's over its
+    seeds, so that both are compared per seed."""
     s = runs.settings
     if "ppo" in s.skip_baselines:
         raise NotApplicable("PPO is left out (--skip-baselines)")
@@ -289,7 +291,8 @@ def fig10_11(runs: Runs, path) -> dict:
                             for r in rows[:n]] for rows in ppo_rows], float)
     ppo_wall = np.mean([[r["wall_total_s"] for r in rows[:n]] for rows in ppo_rows], 0)
     ppo_steps = np.array([r["env_steps"] for r in ppo_rows[0][:n]])
-    curves = {"PARS": (pars["wall_s"], pars["env_steps"].mean(0), pars["reward"]),
+    pars_wall = pars["wall_s"] / pars["reward"].shape[0]
+    curves = {"PARS": (pars_wall, pars["env_steps"].mean(0), pars["reward"]),
               "PPO": (ppo_wall, ppo_steps, ppo_reward)}
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     numbers = {}
@@ -313,7 +316,7 @@ def fig10_11(runs: Runs, path) -> dict:
         numbers["wall-time speed-up to convergence, PPO / PARS"] = round(
             numbers["wall s to convergence, PPO"] / max(numbers["wall s to convergence, PARS"],
                                                       1e-9), 2)
-    axes[0].set_xlabel("wall time (s)")
+    axes[0].set_xlabel("wall time per seed (s)")
     axes[1].set_xlabel("environment steps (agent steps of 0.1 s)")
     axes[0].set_ylabel("training reward per episode")
     for ax in axes:
@@ -325,7 +328,8 @@ def fig10_11(runs: Runs, path) -> dict:
     numbers["environment steps, PPO"] = int(ppo_steps[-1])
     return {"numbers": numbers, "settings": f"PARS LSTM N = {runs.directions}, "
             f"{s.iterations} iterations × {_seeds(s.seeds)} in one program; PPO {s.ppo_seeds} "
-            f"seeds × {_ppo_steps(runs)} env steps (Table II settings), one after another"}
+            f"seeds × {_ppo_steps(runs)} env steps (Table II settings), one after another; "
+            "wall times per seed"}
 
 
 def fig12(runs: Runs, path) -> dict:
