@@ -406,9 +406,9 @@ class LoadSheddingEnv:
         initial policy state (None for feed-forward policies). A `Planner` (e.g. the MPC)
         is called with a fourth argument, `PlanInputs`. The policy state keeps the dtypes of
         `policy_carry` (a saved float32 policy runs in a float64 study). After `done` the
-        reward stops and the policy state is held; without `trace` (and for policies, not planners) the
-        episode loop stops there, so a batch of episodes (vmapped) costs nothing more once
-        all of them are done. Returns {"reward", "shed_pu", "recovered",
+        reward stops and the policy state is held; without `trace` (and for policies, not
+        planners) the episode loop stops there, so a batch of episodes (vmapped) costs nothing
+        more once all of them are done. Returns {"reward", "shed_pu", "recovered",
         "steps" (agent steps taken), "diverged", "policy_carry" (final)}; with `trace`
         (static) also per agent step "vm" (n_steps, n_observed) p.u. and "shed_step_pu"
         (n_steps,), frozen after the episode ends.
