@@ -3,14 +3,15 @@ small-step, many-sweep reference over the study's training tasks, without contro
 
     python -m experiments.step_accuracy --study ieee39_fidvr [--dts 0.002 0.005 0.01]
         [--sweeps 2] [--coarse-dts 0 0.01] [--fine-window 1.0] [--coarse-sweeps K]
-        [--coarse-load-substeps N] [--reference-dt 0.001] [--reference-sweeps 4]
+        [--motor-step rosenbrock] [--reference-dt 0.001] [--reference-sweeps 4]
         [--reference-precision float64] [--tasks train] [--episode S]
         [--out benchmarks/cpu/step_accuracy.json]
 
 A candidate is a (step, sweeps, coarse step) triple: the coarse step (`EnvConfig.coarse_dt`,
 0 for none) is used outside the fault window, `--fine-window` s after clearing, with
-`--coarse-sweeps` network sweeps (default: the candidate's) and `--coarse-load-substeps`
-sub-steps of the load models (`EnvConfig.coarse_load_substeps`).
+`--coarse-sweeps` network sweeps (default: the candidate's); `--motor-step` sets how the
+candidates integrate the load models' motors (`EnvConfig.motor_step`; the reference always
+steps them exponentially).
 
 For each candidate it reports, over every task and agent step (0.1 s samples of the observed
 bus voltages, float32 time loop as in training): the 99th-percentile and largest |ΔV|
@@ -24,8 +25,7 @@ tasks this set does not hold), and no diverged episode under random shedding; th
 names it.
 
 Uncontrolled runs never shed, and shedding can make a step unstable that is stable without
-it (measured on the PNNL 300-bus study: docs/studies.md, "A coarse step with load
-sub-steps"). So each candidate that passes the accuracy rule also runs `--stress-rollouts`
+it (measured on the PNNL 300-bus study: docs/studies.md, "The motors' step"). So each candidate that passes the accuracy rule also runs `--stress-rollouts`
 episodes (default 64; 0: none) of random shedding on the training task with the longest
 fault (`shedding_stress`), and is recommended only if none of them diverges.
 """
@@ -44,6 +44,7 @@ import numpy as np
 
 from baselines.controllers import no_control
 from experiments.studyargs import add_study_arguments, study_from_args
+from jaxgrid.env import MOTOR_STEPS
 from jaxgrid.rollouts import rollout_specs
 from jaxgrid.study import Study, rebuild
 
@@ -54,11 +55,11 @@ STRESS_SHARE = 0.15  # share of the action buses that shed at each agent step un
 
 def run(study: Study, dt: float, episode: float, tasks: str, coarse_dt: float | None = None,
         fine_window: float = 1.0, coarse_sweeps: int | None = None,
-        coarse_load_substeps: int | None = None):
+        motor_step: str = "exponential"):
     """(vm (n_task, n_steps, n_observed), recovered (n_task,), warm wall time s) without
     control at step dt (coarse_dt outside the fault window, None: dt throughout)."""
     env = study.env(dt=dt, episode=episode, coarse_dt=coarse_dt, fine_window=fine_window,
-                    coarse_sweeps=coarse_sweeps, coarse_load_substeps=coarse_load_substeps)
+                    coarse_sweeps=coarse_sweeps, motor_step=motor_step)
     apply, params, carry = no_control(env)
     specs = study.tasks(tasks)
     rollout_specs(study, env, apply, params, specs, carry, trace=True)  # compile
@@ -112,7 +113,7 @@ def check_index(study: Study, tasks: str, agent_dt: float, n_steps: int) -> np.n
 def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: int,
              tasks: str = "train", episode: float | None = None, coarse_dts=(0.0,),
              fine_window: float = 1.0, coarse_sweeps: int | None = None,
-             coarse_load_substeps: int | None = None, reference_precision: str = "float64",
+             motor_step: str = "exponential", reference_precision: str = "float64",
              stress_rollouts: int = 64) -> dict:
     """The report of the module docstring as a dict; a coarse step of 0 means none."""
     episode = episode or study.config.episode
@@ -126,7 +127,7 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
             if coarse and coarse <= dt:
                 continue
             vm, ok, wall = run(candidate_study, dt, episode, tasks, coarse or None, fine_window,
-                               coarse_sweeps, coarse_load_substeps)
+                               coarse_sweeps, motor_step)
             error = np.abs(vm - vm_ref)
             at_check = error[np.arange(len(check)), check]
             row = {"dt_s": dt, "sweeps": n_sweeps, "coarse_dt_s": coarse or None,
@@ -138,7 +139,7 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
             if stress_rollouts and accurate(row):
                 env = candidate_study.env(dt=dt, episode=episode, coarse_dt=coarse or None,
                                           fine_window=fine_window, coarse_sweeps=coarse_sweeps,
-                                          coarse_load_substeps=coarse_load_substeps)
+                                          motor_step=motor_step)
                 stress = shedding_stress(candidate_study, env, stress_rollouts)
                 row["diverged_under_shedding"] = stress["diverged"]
                 row["stress_shed_share"] = stress["shed_share"]
@@ -156,7 +157,7 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
             "study_step": {"dt_s": study.config.dt, "sweeps": study.definition.compile.sweeps,
                            "coarse_dt_s": study.config.coarse_dt},
             "fine_window_s": fine_window, "coarse_sweeps": coarse_sweeps,
-            "coarse_load_substeps": coarse_load_substeps,
+            "motor_step": motor_step,
             "stress": {"rollouts": stress_rollouts, "share": STRESS_SHARE,
                        "task": str(stress_task(study))},
             "candidates": rows,
@@ -181,8 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fine-window", type=float, default=1.0,
                    help="s after clearing at the fine step (with a coarse step)")
     p.add_argument("--coarse-sweeps", type=int, help="network sweeps at the coarse step")
-    p.add_argument("--coarse-load-substeps", type=int,
-                   help="load-model sub-steps per coarse step (default 1)")
+    p.add_argument("--motor-step", choices=MOTOR_STEPS, default="exponential",
+                   help="how the candidates integrate the load models' motors")
     p.add_argument("--reference-dt", type=float, default=0.001, help="s (default 1 ms)")
     p.add_argument("--reference-sweeps", type=int, default=4)
     p.add_argument("--reference-precision", choices=("float64", "float32"), default="float64")
@@ -196,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         study = study_from_args(args)
         report = accuracy(study, args.dts, args.sweeps, args.reference_dt,
                           args.reference_sweeps, args.tasks, args.episode, args.coarse_dts,
-                          args.fine_window, args.coarse_sweeps, args.coarse_load_substeps,
+                          args.fine_window, args.coarse_sweeps, args.motor_step,
                           args.reference_precision, args.stress_rollouts)
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)

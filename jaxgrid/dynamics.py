@@ -20,6 +20,7 @@ from jaxgrid.models import loads
 from jaxgrid.models.base import LoadPorts, Signals
 from jaxgrid.vecmath import sincos
 
+ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)  # ROS2's γ: L-stable, second order for any J
 PHI_SERIES_BELOW = 0.5  # |λ·dt| below which φ1, φ2 come from their Taylor series
 FAMILIES = ("machines", "exciters", "governors", "loads")  # GridModel/GridState fields
 # Evaluation order: each family reads what the earlier ones wrote (exciters EFD, governors
@@ -203,7 +204,7 @@ def _scatter(states, pairs, values):
     return machines, exciters, governors, tuple(loads)
 
 
-def exponential_heun(model: GridModel, x: GridState, dt: float):
+def exponential_heun(model: GridModel, x: GridState, dt: float, implicit=frozenset()):
     """(predict, correct) of one step from x: Heun's Euler predictor and trapezoidal
     corrector, with every stiff pair (`stiff_rates`, λ frozen at x) advanced by the
     exponential Runge-Kutta pair of the same order (ETD2RK, Cox & Matthews 2002):
@@ -214,9 +215,10 @@ def exponential_heun(model: GridModel, x: GridState, dt: float):
     which integrates the part λ·s exactly and is Heun's method where λ = 0. Every pair of
     every group is handled as one concatenated array (one set of kernels, not one per pair).
     predict(s0, k1) -> predicted; correct(s0, predicted, k1, k2) -> new (state trees).
+    The load groups in `implicit` (indices) are left to Heun (`rosenbrock_heun` takes them).
     """
     rates = stiff_rates(model, x)
-    pairs = _stiff_pairs(rates)
+    pairs = [(g, names) for g, names in _stiff_pairs(rates) if g not in implicit]
 
     def euler(s0, k1):
         return axpy(dt, k1, s0)
@@ -241,53 +243,121 @@ def exponential_heun(model: GridModel, x: GridState, dt: float):
     return predict, correct
 
 
-def load_rates(model: GridModel, x: GridState, states: tuple, v):
-    """Rates of the load models' states `states` (x.loads' structure) at slot voltages v
-    (n_slot,), with x's flags: the loads' part of `derivatives` without the network."""
-    v_load = v[model.n_gen:]
-    return tuple(g.model.rates(g.params, xs, LoadPorts(v=v_load[_index(g)], flags=zs))[1]
-                 for g, xs, zs in zip(model.loads, states, x.load_flags))
+def _implicit_blocks(model: GridModel) -> list[tuple[int, tuple[str, ...]]]:
+    """(load group, state names) of every implicit block (`LoadModel.implicit_blocks`)."""
+    return [(g, names) for g, group in enumerate(model.loads)
+            for names in group.model.implicit_blocks()]
 
 
-def substepped_loads(model: GridModel, x: GridState, dt: float, n: int):
-    """(predict, correct) of the load models' states alone over one step of dt seconds in n
-    sub-steps of dt/n: a multirate step for the stiff motors of the loads.
+def _gather_blocks(loads, blocks) -> list:
+    """[(n_blocked,) per block position]: the blocks' states, concatenated in `blocks` order."""
+    return [jnp.concatenate([loads[g][names[i]] for g, names in blocks])
+            for i in range(len(blocks[0][1]))]
 
-    The step's two network solutions fix the loads' bus voltages: v1 (n_slot,) at its start,
-    v2 at the predictor. `predict` takes n exponential Euler sub-steps at v1; `correct` n
-    exponential Heun sub-steps (`exponential_heun`) at the voltage moving linearly from v1
-    to v2, which keeps the step second order. The motors' own electromechanical modes
-    (about −27 ± 85j 1/s for the composite load's motor C at the PNNL 300-bus operating
-    point) then meet Heun's stability limit at dt/n instead of dt, while the network, the
-    machines and their controls take the whole step. With n = 1 both equal the loads' part
-    of `exponential_heun`'s predictor and corrector.
-    predict(s0, k1, v1) -> loads; correct(s0, k1, v1, v2) -> loads, where s0 and k1 are
-    the step's start states and rates (x.integrated() structure).
+
+def _scatter_blocks(loads, blocks, columns) -> tuple:
+    """`loads` (x.loads' structure) with the blocks' states set from `columns`."""
+    loads = [dict(xs) for xs in loads]
+    offset = 0
+    for g, names in blocks:
+        n = loads[g][names[0]].shape[0]
+        for name, column in zip(names, columns):
+            loads[g][name] = column[offset:offset + n]
+        offset += n
+    return tuple(loads)
+
+
+def block_jacobian(model: GridModel, x: GridState, blocks) -> list[list]:
+    """J[i][j] (n_blocked,): ∂(rate of a block's state i)/∂(its state j) at x and the fixed
+    slot voltages x.v, every block of `blocks` concatenated. One forward-mode pass per block
+    position: its tangent seeds position j of every block of a group at once, which the
+    blocks' independence (`LoadModel.implicit_blocks`) allows."""
+    v_load = x.v[model.n_gen:]
+    size = len(blocks[0][1])
+    columns = {}
+    for g in sorted({g for g, _ in blocks}):
+        group, xs = model.loads[g], x.loads[g]
+        ports = LoadPorts(v=v_load[_index(group)], flags=x.load_flags[g])
+        seeds = {name: jnp.zeros((size,) + a.shape, a.dtype) for name, a in xs.items()}
+        for names in group.model.implicit_blocks():
+            for j, name in enumerate(names):
+                seeds[name] = seeds[name].at[j].set(1.0)
+
+        def rates(s, group=group, ports=ports):
+            return group.model.rates(group.params, s, ports)[1]
+
+        columns[g] = jax.vmap(lambda t, xs=xs, rates=rates: jax.jvp(rates, (xs,), (t,))[1])(
+            seeds)
+    return [[jnp.concatenate([columns[g][names[i]][j] for g, names in blocks])
+             for j in range(size)] for i in range(size)]
+
+
+def lu_solver(a: list[list]):
+    """solve(b) -> y with a·y = b, for a batch of small dense systems: a[i][j] and b[i] are
+    (n,) arrays (one system per element), eliminated in place without pivoting, which
+    the linearly implicit step's matrices I − γ·dt·J allow (their E' blocks are scaled
+    rotations with a diagonal above 1)."""
+    size = len(a)
+    a = [list(row) for row in a]
+    for p in range(size):
+        for i in range(p + 1, size):
+            a[i][p] = a[i][p] / a[p][p]
+            for j in range(p + 1, size):
+                a[i][j] = a[i][j] - a[i][p] * a[p][j]
+
+    def solve(b):
+        y = list(b)
+        for i in range(size):
+            for j in range(i):
+                y[i] = y[i] - a[i][j] * y[j]
+        for i in reversed(range(size)):
+            for j in range(i + 1, size):
+                y[i] = y[i] - a[i][j] * y[j]
+            y[i] = y[i] / a[i][i]
+        return y
+
+    return solve
+
+
+def rosenbrock_heun(model: GridModel, x: GridState, dt: float):
+    """(predict, correct) of one step from x, as `exponential_heun`, with every implicit
+    block (`LoadModel.implicit_blocks`: a motor's E', ψk and speed) advanced by the
+    two-stage linearly implicit Rosenbrock method ROS2 (Verwer, Spee, Blom & Hundsdorfer
+    1999), with W = I − γ·dt·J and J the block's Jacobian at x (`block_jacobian`):
+
+        W·K1 = dt·k1,   predicted = s0 + K1,
+        W·K2 = dt·k2 − 2·K1,   new = s0 + 1.5·K1 + 0.5·K2.
+
+    k1 and k2 are the step's two rate evaluations (at s0 and at the predictor, each with
+    its own network solution), so the step costs what Heun's does plus the Jacobian (5
+    forward-mode passes of the load models' rates) and two block solves. ROS2 is second
+    order for any J (a W-method) and L-stable with the exact one; with J = 0 it is Heun.
+    It stays stable for the motors' electromechanical mode (E' against ω, about
+    −27 ± 85j 1/s at the PNNL 300-bus operating point, faster at high voltage), which the
+    exponential step leaves to Heun. Every other state takes `exponential_heun`'s step.
     """
-    step_predict, step_correct = exponential_heun(model, x, dt / n)
+    blocks = _implicit_blocks(model)
+    predict_rest, correct_rest = exponential_heun(model, x, dt, {g for g, _ in blocks})
+    if not blocks:
+        return predict_rest, correct_rest
+    jacobian = block_jacobian(model, x, blocks)
+    solve = lu_solver([[float(i == j) - ROS2_GAMMA * dt * jij for j, jij in enumerate(row)]
+                       for i, row in enumerate(jacobian)])
 
-    def alone(loads):  # a state tree holding only the loads family
-        return (), (), (), loads
+    def first_stage(k1):
+        return solve([dt * r for r in _gather_blocks(k1[3], blocks)])
 
-    def rates(s, v):
-        return alone(load_rates(model, x, s[3], v))
+    def predict(s0, k1):
+        out = predict_rest(s0, k1)
+        start, k_1 = _gather_blocks(s0[3], blocks), first_stage(k1)
+        return (*out[:3], _scatter_blocks(out[3], blocks,
+                                          [s + a for s, a in zip(start, k_1)]))
 
-    def predict(s0, k1, v1):
-        s, k = alone(s0[3]), alone(k1[3])
-        for j in range(n):
-            if j:
-                k = rates(s, v1)
-            s = clip_to_limits(model, step_predict(s, k))
-        return s[3]
-
-    def correct(s0, k1, v1, v2):
-        s, k = alone(s0[3]), alone(k1[3])
-        for j in range(n):
-            if j:
-                k = rates(s, v1 + (j / n) * (v2 - v1))
-            predicted = clip_to_limits(model, step_predict(s, k))
-            k_end = rates(predicted, v1 + ((j + 1) / n) * (v2 - v1))
-            s = clip_to_limits(model, step_correct(s, predicted, k, k_end))
-        return s[3]
+    def correct(s0, predicted, k1, k2):
+        out = correct_rest(s0, predicted, k1, k2)
+        start, k_1 = _gather_blocks(s0[3], blocks), first_stage(k1)
+        k_2 = solve([dt * r - 2.0 * a for r, a in zip(_gather_blocks(k2[3], blocks), k_1)])
+        return (*out[:3], _scatter_blocks(out[3], blocks, [s + 1.5 * a + 0.5 * b
+                                                           for s, a, b in zip(start, k_1, k_2)]))
 
     return predict, correct

@@ -91,8 +91,9 @@ class GridModel:
       omega_b: base angular frequency 2π·f, rad/s (static).
       pq_break: p.u. voltage where constant power turns into constant admittance (static).
       sweeps: fixed-point sweeps per network solution (static).
-      load_substeps: sub-steps of the load models' states per integration step (static;
-        `jaxgrid.dynamics.substepped_loads`): 1 integrates them with everything else.
+      motor_step: how the load models' motors are integrated (static): "exponential"
+        (`jaxgrid.dynamics.exponential_heun`) or "rosenbrock" (`rosenbrock_heun`); the
+        environment sets it from `EnvConfig.motor_step`.
       precision: "float32" or "float64" (static).
       notes: static tuple of strings: what the compiler changed, dropped or warned about.
       bus_names: static name per bus (n_bus,): "Bus<N>" for RAW bus N, and for the internal
@@ -128,7 +129,7 @@ class GridModel:
     precision: str = struct.field(pytree_node=False)
     notes: tuple[str, ...] = struct.field(pytree_node=False)
     bus_names: tuple[str, ...] = struct.field(pytree_node=False, default=())
-    load_substeps: int = struct.field(pytree_node=False, default=1)
+    motor_step: str = struct.field(pytree_node=False, default="exponential")
 
     @property
     def n_bus(self) -> int:

@@ -23,7 +23,7 @@ from jaxgrid import network
 from jaxgrid.checks import Range
 from jaxgrid.batching import vmap_minor
 from jaxgrid.dynamics import (clip_to_limits, derivatives, exponential_heun, machine_state,
-                              solve_network, substepped_loads, update_loads)
+                              rosenbrock_heun, solve_network, update_loads)
 from jaxgrid.grid import GridModel, GridState
 
 
@@ -189,8 +189,9 @@ def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: n
     """One modified-Euler (Heun) step from t to t + dt; returns (state, network residual).
 
     Stiff induction-motor states are advanced by the exponential form of the same step
-    (`jaxgrid.dynamics.exponential_heun`); with model.load_substeps > 1 the load models'
-    states take that many sub-steps (`jaxgrid.dynamics.substepped_loads`). Scheduled load
+    (`jaxgrid.dynamics.exponential_heun`), or, with model.motor_step "rosenbrock", each
+    motor's states together by a linearly implicit step (`jaxgrid.dynamics.rosenbrock_heun`).
+    Scheduled load
     changes apply at the start of the step; the load models' discrete logic advances after the corrector from the corrector's
     network voltages.
     """
@@ -200,17 +201,13 @@ def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: n
         return derivatives(model, x.with_integrated(states, v), fault,
                            fault_active(task, time, dt))
 
-    predict, correct = exponential_heun(model, x, dt)
+    step = rosenbrock_heun if model.motor_step == "rosenbrock" else exponential_heun
+    predict, correct = step(model, x, dt)
     s0 = x.integrated()
     k1, v1, r1 = rates(s0, x.v, t)
     predicted = clip_to_limits(model, predict(s0, k1))
-    if model.load_substeps > 1:
-        load_predict, load_correct = substepped_loads(model, x, dt, model.load_substeps)
-        predicted = (*predicted[:3], load_predict(s0, k1, v1))
     k2, v2, r2 = rates(predicted, v1, t + dt)
     new = clip_to_limits(model, correct(s0, predicted, k1, k2))
-    if model.load_substeps > 1:
-        new = (*new[:3], load_correct(s0, k1, v1, v2))
     return update_loads(model, x.with_integrated(new, v2), x.v, dt), jnp.maximum(r1, r2)
 
 

@@ -52,8 +52,9 @@ def test_accurate_candidates_are_stressed_by_random_shedding(report):
     """Each candidate that passes the accuracy rule also runs random-shedding episodes
     (`shedding_stress`): they shed most of the action buses' load (STRESS_SHARE of the buses
     per agent step), and at the study's own 2-ms step none diverges. The stress catches what
-    uncontrolled runs cannot: on the PNNL 300-bus study, 46 of 64 episodes diverge at 25 ms
-    with 2 load sub-steps and none at 10 ms (docs/studies.md)."""
+    uncontrolled runs cannot: on the PNNL 300-bus study, 52 of 64 episodes diverged at 25 ms
+    with the motors in 2 explicit sub-steps, and none with the Rosenbrock motor step
+    (docs/studies.md)."""
     rows = {(r["dt_s"], r["coarse_dt_s"]): r for r in report["candidates"]}
     for row in rows.values():
         assert (row["diverged_under_shedding"] is None) == (not accurate(row))

@@ -239,7 +239,7 @@ def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):
     write_study(pnnl39, path)
     data = tomllib.loads(path.read_text())
     assert set(data["env"]) == {f.name for f in dataclasses.fields(pnnl39.config)} - {
-        "recovery_buses", "coarse_dt", "coarse_sweeps", "coarse_load_substeps"}, \
+        "recovery_buses", "coarse_dt", "coarse_sweeps", "motor_step"}, \
         "None fields are left out, every other one is explicit"
     assert set(data["params"]) == {f.name for f in dataclasses.fields(EnvParams)}
     assert all(p.startswith("/") for p in data["grid"]["raw"]), "absolute paths"
@@ -288,8 +288,8 @@ ONE_SET = '[tasks.test]\nfault_buses = [4]\n'
                                  r"simulation steps coarse_dt = 0.03 s"),
     ('[env]\ncoarse_dt = 0.01\ncoarse_sweeps = 0\n', r"env.coarse_sweeps = 0: must lie in "
                                                     r"\[1, 100\] network sweeps"),
-    ('[env]\ncoarse_dt = 0.01\ncoarse_load_substeps = 1.5\n',
-     r"env.coarse_load_substeps = 1.5: must be int"),
+    ('[env]\nmotor_step = "implicit"\n',
+     r"env.motor_step = 'implicit': must be one of \('exponential', 'rosenbrock'\)"),
     ('[env]\nepisode = inf\n', r"env.episode = inf: must be finite"),
     ('[env]\nhistory = 100000000000000000\n', r"env.history = 100000000000000000: must lie in "
                                              r"\[1, 1000\] observations"),

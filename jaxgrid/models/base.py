@@ -437,3 +437,11 @@ class LoadModel(DeviceModel):
         λ·(x_r + j·x_i) + rest. The step integrates λ exactly (`jaxgrid.dynamics`,
         exponential Heun); none by default."""
         return {}
+
+    @classmethod
+    def implicit_blocks(cls) -> tuple[tuple[str, ...], ...]:
+        """Blocks of state names, all of one length, whose rates at a fixed bus voltage
+        depend only on the block's own states (one motor's E', ψk and speed): the
+        linearly implicit step (`jaxgrid.dynamics.rosenbrock_heun`) solves each block with
+        its own Jacobian. None by default."""
+        return ()

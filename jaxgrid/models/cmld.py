@@ -86,7 +86,7 @@ from jaxgrid.models.base import (Array, Initial, LoadModel, LoadPorts, LoadSite,
                                  Params, States, device_label, timer_fires)
 from jaxgrid.models.cmld_cons import CON_FRCEL, CONS_BLU1, MOTOR_D_NAMES, MOTORS
 from jaxgrid.models.cmld_init import initialise
-from jaxgrid.models.induction import Cim5bl
+from jaxgrid.models.induction import MOTOR_STATES, Cim5bl
 from jaxgrid.models.options import CompositeOptions
 from jaxgrid.vecmath import power
 
@@ -207,6 +207,11 @@ class Cmldblu2(LoadModel):
         return {(f"m{m}_{re}", f"m{m}_{im}"): lam for m in MOTORS
                 for (re, im), lam in Cim5bl.stiff_rates(_sub(p, f"m{m}_"), _sub(x, f"m{m}_"),
                                                         {}).items()}
+
+    @classmethod
+    def implicit_blocks(cls) -> tuple[tuple[str, ...], ...]:
+        """Motors A-C's states, one block per motor (`Cim5bl.implicit_blocks`)."""
+        return tuple(tuple(f"m{m}_{name}" for name in MOTOR_STATES) for m in MOTORS)
 
     @classmethod
     def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:

@@ -62,6 +62,7 @@ BISECTIONS = 100            # halvings of the slip bracket (below float64 resolu
 GOLDEN_STEPS = 60           # golden-section steps refining the breakdown slip
 SAT_BISECTIONS = 64         # halvings of the Se(|E''|) bracket in the steady state
 W_TORQUE_MIN = 1e-3         # p.u.: speed floor inside ω^D and ω^E of the load torque
+MOTOR_STATES = ("epr", "epi", "psir", "psii", "w")  # one motor's continuous states
 C0_REPORT_TOL = 1e-6        # |file C0 − computed C0| above which the report mentions it
 
 
@@ -279,6 +280,12 @@ class Cim5bl(LoadModel):
         lam_psi = jnp.where(p["double"] > 0, (-1.0 - 1j * (p["lp"] - p["ll"]) * p["k4"] * y)
                             / safe(p["tpp0"]) + rotation, 0.0)
         return {("epr", "epi"): lam_ep, ("psir", "psii"): lam_psi}
+
+    @classmethod
+    def implicit_blocks(cls) -> tuple[tuple[str, ...], ...]:
+        """The motor's E', ψk and speed: its electromechanical mode (E' against ω) is the
+        one `stiff_rates` leaves to the explicit step."""
+        return (MOTOR_STATES,)
 
     @classmethod
     def update(cls, p: Params, x: States, z: States, v: Array, v_old: Array, dt: float) -> States:
