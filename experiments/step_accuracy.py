@@ -25,9 +25,10 @@ tasks this set does not hold), and no diverged episode under random shedding; th
 names it.
 
 Uncontrolled runs never shed, and shedding can make a step unstable that is stable without
-it (measured on the PNNL 300-bus study: docs/studies.md, "The motors' step"). So each candidate that passes the accuracy rule also runs `--stress-rollouts`
-episodes (default 64; 0: none) of random shedding on the training task with the longest
-fault (`shedding_stress`), and is recommended only if none of them diverges.
+it (measured on the PNNL 300-bus study: docs/studies.md, "The motors' step"). So each
+candidate that passes the accuracy rule also runs `--stress-rollouts` episodes (default 64;
+0: none) of random shedding on the training task with the longest fault
+(`shedding_stress`), and is recommended only if none of them diverges.
 """
 from __future__ import annotations
 

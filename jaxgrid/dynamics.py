@@ -283,11 +283,11 @@ def block_jacobian(model: GridModel, x: GridState, blocks) -> list[list]:
             for j, name in enumerate(names):
                 seeds[name] = seeds[name].at[j].set(1.0)
 
-        def rates(s, group=group, ports=ports):
-            return group.model.rates(group.params, s, ports)[1]
+        def column(seed, group=group, xs=xs, ports=ports):
+            return jax.jvp(lambda s: group.model.rates(group.params, s, ports)[1], (xs,),
+                           (seed,))[1]
 
-        columns[g] = jax.vmap(lambda t, xs=xs, rates=rates: jax.jvp(rates, (xs,), (t,))[1])(
-            seeds)
+        columns[g] = jax.vmap(column)(seeds)
     return [[jnp.concatenate([columns[g][names[i]][j] for g, names in blocks])
              for j in range(size)] for i in range(size)]
 

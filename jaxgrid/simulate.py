@@ -191,9 +191,8 @@ def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: n
     Stiff induction-motor states are advanced by the exponential form of the same step
     (`jaxgrid.dynamics.exponential_heun`), or, with model.motor_step "rosenbrock", each
     motor's states together by a linearly implicit step (`jaxgrid.dynamics.rosenbrock_heun`).
-    Scheduled load
-    changes apply at the start of the step; the load models' discrete logic advances after the corrector from the corrector's
-    network voltages.
+    Scheduled load changes apply at the start of the step; the load models' discrete logic
+    advances after the corrector from the corrector's network voltages.
     """
     x = scheduled_shedding(task, x, t, dt)
 
