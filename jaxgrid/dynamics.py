@@ -319,28 +319,39 @@ def lu_solver(a: list[list]):
     return solve
 
 
-def rosenbrock_heun(model: GridModel, x: GridState, dt: float):
+def motor_jacobian(model: GridModel, x: GridState):
+    """`block_jacobian` of every implicit block of the model at x, None when it has none:
+    what `rosenbrock_heun` takes as its `jacobian`."""
+    blocks = _implicit_blocks(model)
+    return block_jacobian(model, x, blocks) if blocks else None
+
+
+def rosenbrock_heun(model: GridModel, x: GridState, dt: float, jacobian=None):
     """(predict, correct) of one step from x, as `exponential_heun`, with every implicit
     block (`LoadModel.implicit_blocks`: a motor's E', ψk and speed) advanced by the
     two-stage linearly implicit Rosenbrock method ROS2 (Verwer, Spee, Blom & Hundsdorfer
-    1999), with W = I − γ·dt·J and J the block's Jacobian at x (`block_jacobian`):
+    1999), with W = I − γ·dt·J and J the block's Jacobian (`block_jacobian`, at x by default):
 
         W·K1 = dt·k1,   predicted = s0 + K1,
         W·K2 = dt·k2 − 2·K1,   new = s0 + 1.5·K1 + 0.5·K2.
 
     k1 and k2 are the step's two rate evaluations (at s0 and at the predictor, each with
-    its own network solution), so the step costs what Heun's does plus the Jacobian (5
-    forward-mode passes of the load models' rates) and two block solves. ROS2 is second
+    its own network solution), so the step costs what Heun's does plus two block solves and
+    the Jacobian (5 forward-mode passes of the load models' rates, held: below). ROS2 is second
     order for any J (a W-method) and L-stable with the exact one; with J = 0 it is Heun.
     It stays stable for the motors' electromechanical mode (E' against ω, about
     −27 ± 85j 1/s at the PNNL 300-bus operating point, faster at high voltage), which the
     exponential step leaves to Heun. Every other state takes `exponential_heun`'s step.
+
+    `jacobian` (`motor_jacobian`) may come from an earlier state: a W-method stays second
+    order with any J, so `jaxgrid.simulate.integrate` evaluates it once per call (an agent
+    step in the environment) and holds it for that call's steps. None: J at x.
     """
     blocks = _implicit_blocks(model)
     predict_rest, correct_rest = exponential_heun(model, x, dt, {g for g, _ in blocks})
     if not blocks:
         return predict_rest, correct_rest
-    jacobian = block_jacobian(model, x, blocks)
+    jacobian = block_jacobian(model, x, blocks) if jacobian is None else jacobian
     solve = lu_solver([[float(i == j) - ROS2_GAMMA * dt * jij for j, jij in enumerate(row)]
                        for i, row in enumerate(jacobian)])
 

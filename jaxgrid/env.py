@@ -319,7 +319,7 @@ class LoadSheddingEnv:
         return len(self.observed) + len(self.action_slots) * self.config.include_action_status
 
     def _observe(self, grid: GridModel, x: GridState, t, task: Task, fault):
-        vm = observe(grid, x, t, self.config.dt, task, fault)[0][self.observed]
+        vm = observe(grid, x, t, self.config.dt, task, fault, self.observed)[0]
         if not self.config.include_action_status:
             return vm, vm
         return vm, jnp.concatenate([vm, x.load_left[self.action_slots]])

@@ -106,10 +106,14 @@ def slot_voltages(net: Network, fault: Fault, active, current):
     return times(net.zr_ss, current) - fault.col * through_fault
 
 
-def bus_voltages(net: Network, fault: Fault, active, current):
-    """All bus voltages (n_bus,) for slot injections `current` (n_slot,)."""
+def bus_voltages(net: Network, fault: Fault, active, current, buses=None):
+    """Bus voltages (n_bus,) for slot injections `current` (n_slot,); with `buses` (static
+    (k,) bus indices) only those (k,), from their rows of the product alone."""
     through_fault = active * (fault.row @ current) / fault.denom
-    return times(net.zr_bs, current) - fault.col_bus * through_fault
+    if buses is None:
+        return times(net.zr_bs, current) - fault.col_bus * through_fault
+    rows = np.concatenate([buses, net.z_bb.shape[0] + np.asarray(buses)])
+    return times(net.zr_bs[rows], current) - fault.col_bus[buses] * through_fault
 
 
 def solve(net: Network, fault: Fault, active, source, load_injection: Callable, v_guess,

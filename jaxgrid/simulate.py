@@ -23,7 +23,8 @@ from jaxgrid import network
 from jaxgrid.checks import Range
 from jaxgrid.batching import vmap_minor
 from jaxgrid.dynamics import (clip_to_limits, derivatives, exponential_heun, machine_state,
-                              rosenbrock_heun, solve_network, update_loads)
+                              motor_jacobian, rosenbrock_heun, solve_network,
+                              update_loads)
 from jaxgrid.grid import GridModel, GridState
 
 
@@ -185,12 +186,15 @@ def fault_active(task: Task, t, dt):
     return _is_on(t, task.fault_start, dt) * (1.0 - _is_on(t, task.fault_end, dt))
 
 
-def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault):
+def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault,
+              jacobian=None):
     """One modified-Euler (Heun) step from t to t + dt; returns (state, network residual).
 
     Stiff induction-motor states are advanced by the exponential form of the same step
     (`jaxgrid.dynamics.exponential_heun`), or, with model.motor_step "rosenbrock", each
-    motor's states together by a linearly implicit step (`jaxgrid.dynamics.rosenbrock_heun`).
+    motor's states together by a linearly implicit step (`jaxgrid.dynamics.rosenbrock_heun`)
+    with `jacobian` (`jaxgrid.dynamics.motor_jacobian`, e.g. held from an earlier state;
+    None: evaluated at x).
     Scheduled load changes apply at the start of the step; the load models' discrete logic
     advances after the corrector from the corrector's network voltages.
     """
@@ -200,8 +204,10 @@ def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: n
         return derivatives(model, x.with_integrated(states, v), fault,
                            fault_active(task, time, dt))
 
-    step = rosenbrock_heun if model.motor_step == "rosenbrock" else exponential_heun
-    predict, correct = step(model, x, dt)
+    if model.motor_step == "rosenbrock":
+        predict, correct = rosenbrock_heun(model, x, dt, jacobian)
+    else:
+        predict, correct = exponential_heun(model, x, dt)
     s0 = x.integrated()
     k1, v1, r1 = rates(s0, x.v, t)
     predicted = clip_to_limits(model, predict(s0, k1))
@@ -217,8 +223,10 @@ def within_bounds(x: GridState, bounds: Bounds):
             & jnp.all(jnp.abs(x.v) <= bounds.max_voltage))
 
 
-def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault):
-    """(vm (n_bus,), va (n_bus,), Δω (n_gen,), δ (n_gen,), load_left, load_flags) at time t.
+def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault,
+            buses=None):
+    """(vm (n_bus,), va (n_bus,), Δω (n_gen,), δ (n_gen,), load_left, load_flags) at time t;
+    with `buses` (static (k,) bus indices) vm and va of those buses only, (k,).
 
     The network is solved with at least `OBSERVE_SWEEPS` sweeps: a sample that falls on a
     fault's start or clearing sees the new topology from the warm start of the step before,
@@ -226,7 +234,7 @@ def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: net
     """
     active = fault_active(task, t, dt)
     _, current, _, _ = solve_network(model, x, fault, active, max(model.sweeps, OBSERVE_SWEEPS))
-    v = network.bus_voltages(model.network, fault, active, current)
+    v = network.bus_voltages(model.network, fault, active, current, buses)
     return (jnp.abs(v), jnp.angle(v), machine_state(x, "dw"), machine_state(x, "delta"),
             x.load_left, x.load_flags)
 
@@ -280,10 +288,14 @@ def integrate(model: GridModel, x: GridState, residual, t0, n, dt: float, task: 
 
     n static: a `lax.scan` (differentiable); n traced (e.g. 0 or a whole agent step, chosen
     per rollout: `LoadSheddingEnv`'s coarse step): a `lax.while_loop`, forward mode only.
+    With model.motor_step "rosenbrock" the motors' Jacobian is evaluated once, at x, and
+    held for the n steps (`heun_step`).
     """
+    jacobian = motor_jacobian(model, x) if model.motor_step == "rosenbrock" else None
+
     def step(j, carry):
         x, residual = carry
-        new, r = heun_step(model, x, t0 + j * dt, dt, task, fault)
+        new, r = heun_step(model, x, t0 + j * dt, dt, task, fault, jacobian)
         return new, jnp.maximum(residual, r)
 
     return jax.lax.fori_loop(0, n, step, (x, residual))

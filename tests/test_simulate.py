@@ -203,3 +203,23 @@ def test_bad_options_are_named(models):
         simulate(models["kundur"], 1.0, dt=0.5)
     with pytest.raises(ValueError, match="bus 5 has no controllable load slot"):
         make_task(models["kundur"], None, [LoadChange(5, 1.0, 0.1)])
+
+
+def test_observed_buses_are_rows_of_the_whole_solution(batch):
+    """`observe` with `buses` (the environment's observed buses) computes only their rows of
+    the bus product; with the fault on, from the first task's final state, they equal the
+    same rows of the whole solution to float32 rounding (1e-6 p.u., rad)."""
+    from jaxgrid import network
+    from jaxgrid.simulate import fault_active, observe
+
+    model, tasks, trajectories = batch
+    task = tasks[0]
+    x = jax.tree.map(lambda a: a[0], trajectories.final)
+    fault = network.fault_view(model.network, task.fault_bus, task.fault_z)
+    t = jnp.asarray(0.55, jnp.float32)
+    assert float(fault_active(task, t, DT)) == 1.0
+    buses = np.array([7, 2, 9, 0])
+    whole = observe(model, x, t, DT, task, fault)
+    part = observe(model, x, t, DT, task, fault, buses)
+    np.testing.assert_allclose(part[0], whole[0][buses], atol=1e-6)
+    np.testing.assert_allclose(part[1], whole[1][buses], atol=1e-6)

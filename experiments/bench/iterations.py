@@ -2,7 +2,8 @@
 one run of the benchmark.
 
     python -m experiments.bench.iterations [--iterations 22] [--baselines 641791a:3 ...]
-        [--devices 2] [--out benchmarks/cpu/iterations.json] [-- TRAIN ARGS]
+        [--variants STUDY.toml ...] [--devices 2] [--out benchmarks/cpu/iterations.json]
+        [-- TRAIN ARGS]
 
 Each side runs `experiments.train` (default arguments: the PNNL 300-bus command of
 docs/performance.md, LSTM, N = 128, b = 64, one task per batch) as a fresh process on
@@ -13,7 +14,8 @@ file and defaults. The figures are the iterations' `wall_s` from the run's metri
 the first (with its compile), the median of iterations 2-3 (early: most perturbed policies
 fail and their episodes stop at the recovery check) and of the last three (after about 20
 updates, more episodes run their whole length), and each early median's ratio to this
-tree's.
+tree's. `--variants` runs this tree once more per study file given (e.g. the same study
+with another `[env]` step), with the same arguments but `--study`, after the plain run.
 """
 from __future__ import annotations
 
@@ -45,6 +47,14 @@ def run_training(tree: Path, iterations: int, devices: int, train_args, out: Pat
     return [row["wall_s"] for row in sorted(rows, key=lambda r: r["iteration"])]
 
 
+def with_study(train_args: list, study: str) -> list:
+    """`train_args` with its `--study` value (or a new one) set to `study`."""
+    if "--study" not in train_args:
+        return [*train_args, "--study", study]
+    k = train_args.index("--study") + 1
+    return [*train_args[:k], study, *train_args[k + 1:]]
+
+
 def summary(name: str, walls: list) -> dict:
     late = walls[-3:] if len(walls) >= 6 else []
     return {"code": name, "iterations": len(walls), "wall_s": walls, "first_s": walls[0],
@@ -60,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--iterations", type=int, default=22)
     p.add_argument("--baselines", nargs="*", default=["641791a:3"],
                    help="COMMIT:ITERATIONS, each run in a git worktree")
+    p.add_argument("--variants", nargs="*", default=[],
+                   help="study files this tree also runs, with the same arguments")
     p.add_argument("--devices", type=int, default=2)
     p.add_argument("--out", default="benchmarks/cpu/iterations.json")
     args = p.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
@@ -79,15 +91,19 @@ def main(argv: list[str] | None = None) -> int:
                                check=True)
             rows.append(summary(commit, walls))
             print(rows[-1], flush=True)
-        rows.append(summary("this", run_training(ROOT, args.iterations, args.devices, extra,
-                                                 Path(tmp) / "run-this")))
-        print(rows[-1], flush=True)
-    this = rows[-1]
+        for k, variant in enumerate([None, *args.variants]):
+            train_args = extra if variant is None else with_study(extra, variant)
+            walls = run_training(ROOT, args.iterations, args.devices, train_args,
+                                 Path(tmp) / f"run-this-{k}")
+            rows.append(summary("this" if variant is None else f"this:{variant}", walls))
+            print(rows[-1], flush=True)
+    this = rows[len(args.baselines)]
     for row in rows:
         row["early_ratio_to_this"] = row["early_median_s"] / this["early_median_s"]
         if row["late_median_s"] and this["late_median_s"]:
             row["late_ratio_to_this"] = row["late_median_s"] / this["late_median_s"]
-    write_report(args.out, train_args=extra, cpu_devices=args.devices, runs=rows)
+    write_report(args.out, train_args=extra, variants=args.variants, cpu_devices=args.devices,
+                 runs=rows)
     return 0
 
 
