@@ -344,8 +344,8 @@ def rosenbrock_heun(model: GridModel, x: GridState, dt: float, jacobian=None):
     exponential step leaves to Heun. Every other state takes `exponential_heun`'s step.
 
     `jacobian` (`motor_jacobian`) may come from an earlier state: a W-method stays second
-    order with any J, so `jaxgrid.simulate.integrate` evaluates it once per call (an agent
-    step in the environment) and holds it for that call's steps. None: J at x.
+    order with any J, so `jaxgrid.simulate.integrate` evaluates it once per call (the
+    environment once per agent step) and holds it for that call's steps. None: J at x.
     """
     blocks = _implicit_blocks(model)
     predict_rest, correct_rest = exponential_heun(model, x, dt, {g for g, _ in blocks})

@@ -36,6 +36,7 @@ from jaxgrid import network
 from jaxgrid.batching import vmap_minor
 from jaxgrid.case import VOLTAGE
 from jaxgrid.checks import InputError, Range, check_int, check_unique
+from jaxgrid.dynamics import motor_jacobian
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
 from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, checked, clip_closed,
@@ -357,11 +358,14 @@ class LoadSheddingEnv:
         window = cfg.in_fault_window(t, task)
         fine, coarse = window & ~done, ~window & ~done
         coarse_grid = grid.replace(sweeps=cfg.coarse_sweeps or grid.sweeps)
+        # one of the two loops runs: both hold the motors' Jacobian at x, evaluated once
+        jacobian = motor_jacobian(grid, x) if grid.motor_step == "rosenbrock" else None
         new, residual = integrate(grid, x, health.residual, t,
-                                  jnp.where(fine, cfg.sim_steps, 0), cfg.dt, task, fault)
+                                  jnp.where(fine, cfg.sim_steps, 0), cfg.dt, task, fault,
+                                  jacobian)
         new, residual = integrate(coarse_grid, new, residual, t,
                                   jnp.where(coarse, cfg.coarse_steps, 0), cfg.coarse_dt, task,
-                                  fault)
+                                  fault, jacobian)
         return checked(x, new, health, residual, t + cfg.agent_dt, cfg.bounds)
 
     def step(self, state: EnvState, action, params: EnvParams, grid: GridModel):

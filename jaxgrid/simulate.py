@@ -283,15 +283,16 @@ def initial_health(model: GridModel) -> Health:
 
 
 def integrate(model: GridModel, x: GridState, residual, t0, n, dt: float, task: Task,
-              fault: network.Fault):
+              fault: network.Fault, jacobian=None):
     """n Heun steps of dt seconds from time t0 (s, traced); (state, largest residual so far).
 
     n static: a `lax.scan` (differentiable); n traced (e.g. 0 or a whole agent step, chosen
     per rollout: `LoadSheddingEnv`'s coarse step): a `lax.while_loop`, forward mode only.
-    With model.motor_step "rosenbrock" the motors' Jacobian is evaluated once, at x, and
-    held for the n steps (`heun_step`).
+    With model.motor_step "rosenbrock" the motors' Jacobian is evaluated once, at x (or
+    given, `jaxgrid.dynamics.motor_jacobian`), and held for the n steps (`heun_step`).
     """
-    jacobian = motor_jacobian(model, x) if model.motor_step == "rosenbrock" else None
+    if jacobian is None and model.motor_step == "rosenbrock":
+        jacobian = motor_jacobian(model, x)
 
     def step(j, carry):
         x, residual = carry
