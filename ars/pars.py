@@ -15,7 +15,8 @@ One jit-compiled function does a whole iteration:
      2N vectors the minor one, so XLA:CPU's loops run over them), with the policy network
      run batch-first (`batch_major`, θ kept batch-first) so each direction's weights are
      read in place. With `task_batch`, the tasks run in batches of that many, one batch
-     after another;
+     after another; with `compact_after`, a batch's episodes still running after that many
+     agent steps continue regrouped in smaller chunks (`_regrouped`);
   4. average the returns per ± direction, keep the top b directions by max(r+, r−);
   5. θ += α / (b·σ_b) Σ_top (r+ − r−)·δ, σ_b the std of the 2b selected returns (1 if 0);
   6. α ← ε·α, ν ← ε·ν; merge the observation statistics of every rollout.
@@ -51,6 +52,14 @@ class ParsConfig:
         after another, and a batch stops once all its episodes are done (episodes that fail
         early stop costing), at the price of smaller batches. Results are equal to float
         rounding (batches of other sizes compile apart; a borderline episode can flip).
+      compact_after: agent steps after which a batch's episodes still running continue
+        regrouped (None: never). All of a device's episodes of a task batch run this many
+        steps together; those still running then run to their end in chunks of
+        1/`compact_chunks` of them, as many chunks as they fill, so episodes that ended
+        (e.g. failed a recovery check) stop costing. The episode must offer `begin`,
+        `resume`, `done` and `result` (`jaxgrid.rollouts.PointEpisode`). Results are equal
+        to float rounding, as for `task_batch`.
+      compact_chunks: see `compact_after`.
       seed: PRNG seed.
     """
 
@@ -61,6 +70,8 @@ class ParsConfig:
     decay: float = 0.99
     tasks_per_iteration: int = 9
     task_batch: int | None = None
+    compact_after: int | None = None
+    compact_chunks: int = 4
     seed: int = 0
 
     def __post_init__(self):
@@ -74,6 +85,9 @@ class ParsConfig:
             "task_batch": (self.task_batch is None
                            or 1 <= self.task_batch <= self.tasks_per_iteration,
                            f"None or in [1, tasks_per_iteration = {self.tasks_per_iteration}]"),
+            "compact_after": (self.compact_after is None or self.compact_after >= 1,
+                              "None or >= 1"),
+            "compact_chunks": (self.compact_chunks >= 1, ">= 1"),
         }
         for name, (ok, allowed) in checks.items():
             if not ok:
@@ -93,11 +107,15 @@ class Vmaps:
       tasks: `tasks(fun)(tasks)`, `fun` batched over a batch of tasks (leading axis).
       network: applied to the policy network `apply(θ, obs, carry)` before the vmaps meet
         it (e.g. `jaxgrid.batching.batch_major`); default unchanged.
+      lanes: `lanes(fun, in_axes)(thetas, tasks, loops)`, `fun` batched over the three
+        (one θ, task (or one shared, in_axes None) and episode loop per rollout:
+        `ParsConfig.compact_after`'s chunks).
     """
 
     thetas: Callable = jax.vmap
     tasks: Callable = jax.vmap
     network: Callable = _unchanged
+    lanes: Callable = jax.vmap
 
 
 @struct.dataclass
@@ -193,6 +211,37 @@ def _in_batches(run, tasks, size: int):
     return out
 
 
+def _regrouped(episode, apply, thetas, batch, stats, carry0, data, config: ParsConfig,
+               vmaps: Vmaps):
+    """The (n_θ, c, ...) results of every θ of `thetas` (n_θ, size) on every task of `batch`
+    (c tasks): all n_θ·c episodes run `config.compact_after` agent steps together
+    (`episode.begin`), then those still running are regrouped, running first, and continue
+    to their end (`episode.resume`) in chunks of ⌈n_θ·c / compact_chunks⌉, as many as they
+    fill."""
+    mean, std = stats
+    n_theta, c = thetas.shape[0], int(jax.tree.leaves(batch)[0].shape[0])
+    lanes = n_theta * c
+    size = -(-lanes // config.compact_chunks)
+    loops = vmaps.thetas(lambda theta: vmaps.tasks(lambda task: episode.begin(
+        apply, (theta, mean, std), task, carry0, data, config.compact_after))(batch))(thetas)
+    loops = jax.tree.map(lambda a: a.reshape((lanes,) + a.shape[2:]), loops)
+    running = ~jax.vmap(episode.done)(loops)
+    order = jnp.argsort(~running, stable=True)  # lane = θ index · c + task index
+
+    def chunk(k, loops):
+        lane = order[jnp.minimum(k * size + jnp.arange(size), lanes - 1)]
+        # one task: shared by the chunk (its data is not gathered per rollout)
+        tasks = jax.tree.map(lambda a: a[0] if c == 1 else a[lane % c], batch)
+        part = vmaps.lanes(lambda theta, task, loop: episode.resume(
+            apply, (theta, mean, std), task, data, loop), (0, None if c == 1 else 0, 0))(
+                thetas[lane // c], tasks, jax.tree.map(lambda a: a[lane], loops))
+        return jax.tree.map(lambda a, b: a.at[lane].set(b), loops, part)
+
+    loops = jax.lax.fori_loop(0, (running.sum() + size - 1) // size, chunk, loops)
+    out = jax.vmap(episode.result)(loops)
+    return jax.tree.map(lambda a: a.reshape((n_theta, c) + a.shape[1:]), out)
+
+
 def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
                    mesh: Mesh | None = None, seeds: int | None = None,
                    vmaps: Vmaps = Vmaps()):
@@ -213,6 +262,11 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
     if (2 * n_dir) % mesh.size:
         raise ValueError(f"2·directions = {2 * n_dir} perturbed policies do not split over "
                          f"{mesh.size} devices")
+    phases = ("begin", "resume", "done", "result")
+    if config.compact_after is not None and not all(hasattr(episode, f) for f in phases):
+        raise ValueError(f"compact_after = {config.compact_after}: the episode must run in "
+                         f"two parts ({', '.join(phases)}; e.g. jaxgrid.rollouts."
+                         "PointEpisode), or set compact_after None")
     spread = NamedSharding(mesh, PartitionSpec("batch"))
     apply = normalized_policy(policy, vmaps.network)
     carry0 = initial_carry(policy)
@@ -231,6 +285,9 @@ def make_iteration(episode, policy: Policy, config: ParsConfig, sample=None,
 
         def rollouts(thetas, picked, mean, std, data):  # one device's share of the thetas
             def per_batch(batch):  # (c, ...) tasks -> (2N/devices, c, ...) episode results
+                if config.compact_after is not None:
+                    return _regrouped(episode, apply, thetas, batch, (mean, std), carry0,
+                                      data, config, vmaps)
                 return vmaps.thetas(lambda theta: vmaps.tasks(
                     lambda task: episode(apply, (theta, mean, std), task, carry0, data))(
                         batch))(thetas)

@@ -67,6 +67,8 @@ class Problem(Protocol):
     Attributes:
       episode: episode(policy_apply, policy_params, task, policy_carry, data) -> dict with
         "reward" (), "policy_carry" and optionally "steps" () (`ars.pars.make_iteration`).
+        With `ParsConfig.compact_after` it must also run in two parts (`begin`, `resume`,
+        `done`, `result`: `jaxgrid.rollouts.PointEpisode`).
       tasks: pytree of the training tasks, leading axis n_tasks.
       data: pytree the episode reads (passed to the compiled iteration, not closed over).
       obs_size: length of the policy's input.  action_size: length of its output.

@@ -407,21 +407,67 @@ class LoadSheddingEnv:
 
     def episode(self, policy_apply, policy_params, task: Task, params: EnvParams,
                 grid: GridModel, policy_carry=None, trace: bool = False):
-        """One whole episode in `lax.scan` (un-batched; `rollout` vmaps it over tasks).
+        """One whole episode (un-batched; `rollout` vmaps it over tasks).
 
         policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
         initial policy state (None for feed-forward policies). A `Planner` (e.g. the MPC)
         is called with a fourth argument, `PlanInputs`. The policy state keeps the dtypes of
         `policy_carry` (a saved float32 policy runs in a float64 study). After `done` the
         reward stops and the policy state is held; without `trace` (and for policies, not
-        planners) the episode loop stops there, so a batch of episodes (vmapped) costs nothing
-        more once all of them are done. Returns {"reward", "shed_pu", "recovered",
-        "steps" (agent steps taken), "diverged", "policy_carry" (final)}; with `trace`
-        (static) also per agent step "vm" (n_steps, n_observed) p.u. and "shed_step_pu"
-        (n_steps,), frozen after the episode ends.
+        planners) the episode loop stops there (`episode_run`), so a batch of episodes
+        (vmapped) costs nothing more once all of them are done. Returns {"reward",
+        "shed_pu", "recovered", "steps" (agent steps taken), "diverged", "policy_carry"
+        (final)}; with `trace` (static) also per agent step "vm" (n_steps, n_observed) p.u.
+        and "shed_step_pu" (n_steps,), frozen after the episode ends.
         """
-        n_observed = len(self.observed)
+        loop = self.episode_start(task, params, grid, policy_carry)
+        if not (trace or isinstance(policy_apply, Planner)):
+            loop = self.episode_run(policy_apply, policy_params, params, grid, loop,
+                                    self.config.n_steps)
+            return self.episode_result(loop)
+        # a scan: per-step outputs, and an unbatched step index for the planner
+        step = self._episode_step(policy_apply, policy_params, params, grid, trace)
+        final, per_step = jax.lax.scan(step, loop[1], jnp.arange(self.config.n_steps))
+        out = self.episode_result((loop[0], final))
+        if trace:
+            out["vm"], out["shed_step_pu"] = per_step
+        return out
+
+    def episode_start(self, task: Task, params: EnvParams, grid: GridModel, policy_carry=None):
+        """The loop state of an episode before its first agent step: (k () int agent steps
+        taken, (obs, EnvState, policy carry, reward so far, p.u. shed so far, failed))."""
         obs, state = self.reset(None, task, params, grid)
+        zero = jnp.zeros((), obs.dtype)
+        return jnp.zeros((), jnp.int32), (obs, state, policy_carry, zero, zero,
+                                          jnp.zeros((), bool))
+
+    def episode_run(self, policy_apply, policy_params, params: EnvParams, grid: GridModel,
+                    loop, until):
+        """The episode `loop` (`episode_start`) continued until agent step `until` (int) or
+        until it is done, in a `while_loop`; vmapped, until every episode of the batch is.
+        Splitting an episode into runs does not change it (`ars.pars` regroups the episodes
+        still running between two runs)."""
+        step = self._episode_step(policy_apply, policy_params, params, grid, False)
+        return jax.lax.while_loop(lambda lp: (lp[0] < until) & ~lp[1][1].done,
+                                  lambda lp: (lp[0] + 1, step(lp[1], lp[0])[0]), loop)
+
+    @staticmethod
+    def episode_done(loop):
+        """() bool: the episode of `loop` has ended."""
+        return loop[1][1].done
+
+    @staticmethod
+    def episode_result(loop) -> dict:
+        """`episode`'s dict (without the trace) from a finished episode loop."""
+        _, state, carry, total, shed, failed = loop[1]
+        return {"reward": total, "shed_pu": shed, "recovered": ~failed, "steps": state.step,
+                "diverged": state.health.diverged, "policy_carry": carry}
+
+    def _episode_step(self, policy_apply, policy_params, params: EnvParams, grid: GridModel,
+                      trace: bool):
+        """step(loop carry, k) -> (carry, per-step outputs or None): one agent step of the
+        policy's episode (held once done)."""
+        n_observed = len(self.observed)
 
         def step(carry, k):
             obs, state, policy_state, total, shed, failed = carry
@@ -440,24 +486,7 @@ class LoadSheddingEnv:
             per_step = (new.history[-1, :n_observed], shed_now) if trace else None
             return (obs, new, policy_state, total, shed + shed_now, failed), per_step
 
-        zero = jnp.zeros((), obs.dtype)
-        init = (obs, state, policy_carry, zero, zero, jnp.zeros((), bool))
-        n_steps = self.config.n_steps
-        if trace or isinstance(policy_apply, Planner):
-            # a scan: per-step outputs, and an unbatched step index for the planner
-            final, per_step = jax.lax.scan(step, init, jnp.arange(n_steps))
-        else:
-            # stops once done; vmapped, once every episode of the batch is done
-            _, final = jax.lax.while_loop(
-                lambda loop: (loop[0] < n_steps) & ~loop[1][1].done,
-                lambda loop: (loop[0] + 1, step(loop[1], loop[0])[0]),
-                (jnp.zeros((), jnp.int32), init))
-        _, state, carry, total, shed, failed = final
-        out = {"reward": total, "shed_pu": shed, "recovered": ~failed, "steps": state.step,
-               "diverged": state.health.diverged, "policy_carry": carry}
-        if trace:
-            out["vm"], out["shed_step_pu"] = per_step
-        return out
+        return step
 
     def rollout(self, policy_apply, policy_params, tasks: Task, params: EnvParams,
                 grid: GridModel, policy_carry=None, trace: bool = False):

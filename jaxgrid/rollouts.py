@@ -1,11 +1,12 @@
 """The grid side of training and evaluation: episodes at a study's operating points.
 
-`at_point` picks an operating point of the stacked models inside jit; `point_episode` is the
+`at_point` picks an operating point of the stacked models inside jit; `PointEpisode` is the
 episode a trainer rolls out (`ars.pars.make_iteration`); `stratified_sampler` draws tasks
 as the PNNL PARS study does; `training_problem` bundles what `ars.train.train` needs from a
 study (its tasks, the models, the sizes, and `GRID_VMAPS`: rollouts batched with the batch
 as every array's minor axis, `jaxgrid.batching`); `rollout_specs` runs a controller on any
-tasks of a study in one compiled call (evaluation). Nothing here imports `ars`: the trainer's
+tasks of a study in one compiled call (evaluation); `recovery_check_step` is where a
+trainer regroups the episodes still running. Nothing here imports `ars`: the trainer's
 types are met by their fields.
 """
 from __future__ import annotations
@@ -37,15 +38,36 @@ def at_point(models: GridModel, point) -> GridModel:
     return jax.tree.map(lambda a: a[point], models)
 
 
-def point_episode(env: LoadSheddingEnv, params: EnvParams):
-    """episode(policy_apply, policy_params, task: PointTask, policy_carry, models) -> dict:
-    `env.episode` at the task's operating point of stacked `models` (for `ars.pars`)."""
+@dataclasses.dataclass(frozen=True)
+class PointEpisode:
+    """`env.episode` at the task's operating point of stacked `models` (for `ars.pars`):
+    `episode(policy_apply, policy_params, task: PointTask, policy_carry, models) -> dict`,
+    or in two runs, `result(resume(..., begin(..., steps)))`, between which the trainer
+    regroups the episodes still running (`ars.pars.ParsConfig.compact_after`)."""
 
-    def episode(policy_apply, policy_params, task: PointTask, policy_carry, models):
-        return env.episode(policy_apply, policy_params, task.task, params,
-                           at_point(models, task.point), policy_carry)
+    env: LoadSheddingEnv
+    params: EnvParams
 
-    return episode
+    def __call__(self, policy_apply, policy_params, task: PointTask, policy_carry, models):
+        return self.env.episode(policy_apply, policy_params, task.task, self.params,
+                                at_point(models, task.point), policy_carry)
+
+    def begin(self, policy_apply, policy_params, task: PointTask, policy_carry, models,
+              steps: int):
+        """The episode's loop after `steps` agent steps (or when done, if sooner)."""
+        grid = at_point(models, task.point)
+        loop = self.env.episode_start(task.task, self.params, grid, policy_carry)
+        return self.env.episode_run(policy_apply, policy_params, self.params, grid, loop,
+                                    steps)
+
+    def resume(self, policy_apply, policy_params, task: PointTask, models, loop):
+        """`loop` (from `begin`) run to the episode's end."""
+        return self.env.episode_run(policy_apply, policy_params, self.params,
+                                    at_point(models, task.point), loop,
+                                    self.env.config.n_steps)
+
+    done = staticmethod(LoadSheddingEnv.episode_done)
+    result = staticmethod(LoadSheddingEnv.episode_result)
 
 
 def rollout_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
@@ -83,6 +105,15 @@ def _points_rollout(env: LoadSheddingEnv, policy_apply, trace: bool):
     return jax.jit(run)
 
 
+def recovery_check_step(study: Study, task_set: str = "train") -> int:
+    """The agent step by which every task of `task_set` has had its first recovery check
+    (the first step that ends more than `recovery_time` s after clearing): an episode that
+    fails it has stopped by then (`ars.pars.ParsConfig.compact_after`)."""
+    last_clearing = max(s.fault_start + s.fault_duration for s in study.tasks(task_set))
+    agent_dt = study.env().config.agent_dt
+    return int(np.floor((last_clearing + float(study.params.recovery_time)) / agent_dt)) + 1
+
+
 def stratified_sampler(task_set: TaskSet, n_points: int, m: int):
     """sample(key) -> (m,) indices into `task_set.specs(n_points)`: as the PARS study, k_b
     distinct fault buses × k_d distinct durations (k_b·k_d = m, k_d as large as the set
@@ -115,6 +146,7 @@ class MinorVmaps(NamedTuple):
     thetas: Callable = functools.partial(vmap_minor, first=True)
     tasks: Callable = vmap_minor
     network: Callable = batch_major
+    lanes: Callable = functools.partial(vmap_minor, first=(True, False, False))
 
 
 GRID_VMAPS = MinorVmaps()
@@ -133,7 +165,7 @@ class GridProblem:
 
     Attributes:
       study: the study.  env: its environment as trained (history, episode).
-      episode: `point_episode`.  tasks: PointTask batch, each point an index into `data`.
+      episode: `PointEpisode`.  tasks: PointTask batch, each point an index into `data`.
       data: the task set's operating points' models, stacked (n_points, ...).
       obs_size: stacked observation length.  action_size: action buses.
       action_low, action_high: the action range, p.u.
@@ -180,7 +212,7 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
             "task_set": task_set, "task_sampling": sampling, "layout": layout(env.config),
             "history": env.config.history, "episode": env.config.episode}
     return GridProblem(
-        study, env, point_episode(env, params), study.batch(specs),
+        study, env, PointEpisode(env, params), study.batch(specs),
         jax.tree.map(lambda a: a[np.array(points)], study.models),
         env.config.history * env.obs_size, len(env.action_slots), float(params.action_low),
         float(params.action_high),

@@ -24,6 +24,43 @@ def quadratic_episode(apply, params, task, carry, scale=1.0):
     return {"reward": -100.0 * scale * jnp.sum((action - task) ** 2), "policy_carry": carry}
 
 
+class ShortfallEpisode:
+    """A looped toy episode: each step earns `quadratic_episode`'s reward, and the episode
+    ends once its total falls below `floor` or after `steps` steps, so the episodes of a
+    batch end at different steps. Runs whole or in two parts (`begin`, then `resume`), as
+    `ParsConfig.compact_after` needs."""
+
+    steps, floor = 6, -1.5
+
+    def __call__(self, apply, params, task, carry, scale=1.0):
+        return self.result(self.resume(apply, params, task, scale,
+                                       self.begin(apply, params, task, carry, scale, 0)))
+
+    def begin(self, apply, params, task, carry, scale, steps):
+        loop = (jnp.zeros((), jnp.int32), carry, jnp.zeros(()), jnp.zeros((), bool))
+        return self._run(apply, params, task, scale, loop, steps)
+
+    def resume(self, apply, params, task, scale, loop):
+        return self._run(apply, params, task, scale, loop, self.steps)
+
+    def _run(self, apply, params, task, scale, loop, until):
+        def step(loop):
+            k, carry, total, _ = loop
+            out = quadratic_episode(apply, params, task, carry, scale)
+            total = total + out["reward"]
+            return k + 1, out["policy_carry"], total, (total < self.floor) | (k + 1 >= self.steps)
+
+        return jax.lax.while_loop(lambda lp: (lp[0] < until) & ~lp[3], step, loop)
+
+    @staticmethod
+    def done(loop):
+        return loop[3]
+
+    @staticmethod
+    def result(loop):
+        return {"reward": loop[2], "policy_carry": loop[1], "steps": loop[0]}
+
+
 def test_update_equals_the_hand_computed_one():
     rng = np.random.default_rng(0)
     theta, delta = rng.normal(size=5), rng.normal(size=(4, 5))
@@ -81,12 +118,12 @@ def quadratic():
     return policy, config
 
 
-def _train(policy, config, iterations, mesh=None):
-    iteration = make_iteration(quadratic_episode, policy, config, mesh=mesh)
+def _train(policy, config, iterations, mesh=None, episode=quadratic_episode):
+    iteration = make_iteration(episode, policy, config, mesh=mesh)
     state, history = init_state(policy, config), []
     for _ in range(iterations):
         state, metrics = iteration(state, TARGETS, 1.0)
-        history.append(float(metrics["reward_mean"]))
+        history.append({k: float(v) for k, v in metrics.items()})
     return state, history, iteration
 
 
@@ -137,7 +174,8 @@ def test_seeds_in_one_program_equal_the_runs_one_by_one(quadratic):
         alone, history, _ = _train(policy, dataclasses.replace(config, seed=config.seed + i), 5)
         np.testing.assert_allclose(np.asarray(state.theta[i]), np.asarray(alone.theta),
                                    rtol=1e-5, atol=1e-6)
-        assert float(metrics["reward_mean"][i]) == pytest.approx(history[-1], rel=1e-5)
+        assert float(metrics["reward_mean"][i]) == pytest.approx(history[-1]["reward_mean"],
+                                                                 rel=1e-5)
     assert not np.allclose(np.asarray(state.theta[0]), np.asarray(state.theta[1]))
 
 
@@ -155,12 +193,38 @@ def test_tasks_in_batches_equal_all_tasks_at_once(quadratic):
                                rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("task_batch, chunks", [(None, 3), (1, 4), (None, 1)])
+def test_regrouped_episodes_equal_whole_ones(quadratic, task_batch, chunks):
+    """compact_after: the episodes still running after the first step continue regrouped in
+    chunks (3: ⌈16/3⌉ = 6 lanes, the last chunk padded; 1: all lanes) or, with one task per
+    batch, sharing their task: the same θ and the same steps as whole episodes, to float32
+    rounding (the chunks are batches of other sizes). Episodes end at 1 to 6 steps."""
+    import dataclasses
+
+    policy, config = quadratic
+    config = dataclasses.replace(config, task_batch=task_batch, noise=0.3)
+    whole, whole_log, _ = _train(policy, config, 4, episode=ShortfallEpisode())
+    split, split_log, _ = _train(policy, dataclasses.replace(
+        config, compact_after=1, compact_chunks=chunks), 4, episode=ShortfallEpisode())
+    np.testing.assert_allclose(np.asarray(split.theta), np.asarray(whole.theta), rtol=1e-5,
+                               atol=1e-6)
+    assert [row["env_steps"] for row in split_log] == [row["env_steps"] for row in whole_log]
+    steps = [row["env_steps"] / row["rollouts"] for row in whole_log]
+    assert 1 < min(steps) and max(steps) < ShortfallEpisode.steps, \
+        f"mean steps per episode {steps}: the episodes must end at different steps"
+
+
 def test_bad_hyper_parameters_are_named(quadratic):
     policy, config = quadratic
     with pytest.raises(ValueError, match=r"top = 9: allowed in \[1, directions = 8\]"):
         ParsConfig(directions=8, top=9)
     with pytest.raises(ValueError, match="decay = 1.5"):
         ParsConfig(decay=1.5)
+    with pytest.raises(ValueError, match="compact_after = 0: allowed None or >= 1"):
+        ParsConfig(compact_after=0)
+    with pytest.raises(ValueError, match=r"compact_after = 2: the episode must run in two "
+                                         r"parts \(begin, resume, done, result"):
+        make_iteration(quadratic_episode, policy, ParsConfig(compact_after=2))
     iteration = make_iteration(quadratic_episode, policy, ParsConfig(tasks_per_iteration=5))
     with pytest.raises(ValueError, match="tasks_per_iteration = 5: only 4 tasks"):
         iteration(init_state(policy, config), TARGETS, 1.0)

@@ -117,6 +117,31 @@ def test_pars_iteration_compiles_once_across_points_and_task_sets(pnnl39):
         "one compilation per task-array shape (2 tasks, 9 tasks), none per operating point"
 
 
+@pytest.mark.parametrize("task_batch", [1, None])
+def test_regrouped_grid_episodes_equal_whole_ones(pnnl39, task_batch):
+    """`PointEpisode` in two parts (`ParsConfig.compact_after`): episodes regrouped after 2
+    agent steps, with one task per batch (the chunk shares it) and with two tasks at two
+    operating points (each rollout gathers its model), give the iteration of whole
+    episodes: the same steps and θ to float32 rounding (the chunks are other batch sizes)."""
+    from ars.pars import ParsConfig, init_state
+    from ars.train import TrainConfig, make_trainer
+    from jaxgrid.rollouts import training_problem
+
+    problem = training_problem(pnnl39, "linear", history=1, episode=0.5)
+    tasks = pnnl39.batch([TaskSpec(4, 0.05, 0.1, 0), TaskSpec(15, 0.08, 0.1, 2)])
+    results = []
+    for compact in (None, 2):
+        config = ParsConfig(directions=2, top=1, tasks_per_iteration=2, task_batch=task_batch,
+                            compact_after=compact, compact_chunks=3)
+        trainer = make_trainer(problem, TrainConfig("linear", (), config))
+        state, metrics = trainer.iteration(init_state(trainer.policy, config), tasks,
+                                           problem.data)
+        results.append((np.asarray(state.theta), float(metrics["env_steps"])))
+    (whole, whole_steps), (split, split_steps) = results
+    assert split_steps == whole_steps == 2 * 2 * 2 * 5
+    np.testing.assert_allclose(split, whole, rtol=1e-5, atol=1e-5)
+
+
 def test_at_point_selects_inside_jit(pnnl39):
     pick = jax.jit(lambda models, k: at_point(models, k).load_p0)
     for k in range(3):

@@ -183,6 +183,30 @@ def test_tasks_per_iteration_fits_the_set_or_names_the_flag():
         tasks_per_iteration(args(9), study)
 
 
+def test_compact_after_is_the_last_recovery_check_or_names_the_flag():
+    """--compact-after 'check' is the agent step of the task set's last recovery check (the
+    last fault cleared at 1.08 s, checked more than 5 s later: step 61 of 0.1 s); 'auto' is
+    'check' with one task per batch only; a step not inside the episode is off; a bad value
+    names the flag and what it allows."""
+    from types import SimpleNamespace
+
+    from experiments.train import compact_after
+
+    specs = [SimpleNamespace(fault_start=1.0, fault_duration=d) for d in (0.0, 0.08, 0.05)]
+    study = SimpleNamespace(
+        tasks=lambda name: specs, params=SimpleNamespace(recovery_time=5.0),
+        env=lambda episode=10.0: SimpleNamespace(config=SimpleNamespace(
+            agent_dt=0.1, n_steps=round(episode / 0.1))))
+    assert compact_after("check", study) == 61
+    assert compact_after("auto", study, task_batch=1) == 61
+    assert compact_after("auto", study, task_batch=None) is None
+    assert compact_after("30", study) == 30
+    assert compact_after("check", study, episode=6.0) is None
+    with pytest.raises(ValueError, match=r"--compact-after 'soon': allowed 'auto', 'check', "
+                                         r"'off' or a number of agent steps >= 1"):
+        compact_after("soon", study)
+
+
 def test_a_training_error_starts_on_a_new_line(tmp_path, capsys, monkeypatch):
     """An error in an iteration closes the progress bar first, so the message has its own
     line."""

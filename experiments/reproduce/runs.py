@@ -25,7 +25,8 @@ import numpy as np
 from ars.pars import ParsConfig, init_state
 from ars.train import TrainConfig, make_trainer
 from experiments.reproduce.claims import best_ppo_seed
-from experiments.train import SMOOTHING, paper_preset, smoothed, train_study, widths
+from experiments.train import (SMOOTHING, compact_after, paper_preset, smoothed, train_study,
+                               widths)
 from jaxgrid.rollouts import rollout_specs, training_problem
 from jaxgrid.study import Study, load_study, write_study
 
@@ -138,13 +139,16 @@ class Runs:
     # --- PARS ------------------------------------------------------------------------------
     def pars_config(self, policy: str, directions: int) -> tuple[TrainConfig, dict]:
         """(TrainConfig, `training_problem` arguments) of a PARS training of `policy` with
-        N = directions, b = N/2, the preset's widths, decay and task batch, the study's
-        history for the policy kind and its task sampling, `settings.seeds` seeds in one
-        program (the config's out and resume are `pars`'s)."""
+        N = directions, b = N/2, the preset's widths, decay and task batch (with one task per
+        batch, regrouped after the recovery check: `experiments.train.compact_after`), the
+        study's history for the policy kind and its task sampling, `settings.seeds` seeds in
+        one program (the config's out and resume are `pars`'s)."""
         s = self.settings
+        task_batch = self.preset["task_batch"]
         pars = ParsConfig(directions=directions, top=max(1, directions // 2),
                           decay=self.preset["decay"], tasks_per_iteration=s.tasks_per_iteration,
-                          task_batch=self.preset["task_batch"])
+                          task_batch=task_batch,
+                          compact_after=compact_after("auto", self.study, task_batch=task_batch))
         config = TrainConfig(policy=policy, hidden=() if policy == "linear"
                              else widths(self.preset["hidden"]), pars=pars,
                              iterations=s.iterations, seeds=s.seeds)
@@ -156,6 +160,8 @@ class Runs:
         config, problem = self.pars_config(policy, directions)
         inputs = {k: v for k, v in dataclasses.asdict(config).items()
                   if k not in ("out", "resume")}
+        for speed_only in ("compact_after", "compact_chunks"):  # folders named as before them
+            inputs["pars"].pop(speed_only)
         return self.folder(f"pars_{policy}_N{directions}", {"config": inputs, **problem})
 
     def pars_finished(self, folder: Path) -> bool:
