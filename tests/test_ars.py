@@ -214,6 +214,24 @@ def test_regrouped_episodes_equal_whole_ones(quadratic, task_batch, chunks):
         f"mean steps per episode {steps}: the episodes must end at different steps"
 
 
+def test_regrouped_episodes_under_the_seed_vmap(quadratic):
+    """With seeds vmapped into one program, each seed's chunk count differs (the chunk loop
+    runs the largest, the others' extra chunks change nothing): θ as whole episodes."""
+    import dataclasses
+
+    policy, config = quadratic
+    config = dataclasses.replace(config, noise=0.3)
+    thetas = []
+    for compact in (None, 1):
+        regrouped = dataclasses.replace(config, compact_after=compact, compact_chunks=3)
+        iteration = make_iteration(ShortfallEpisode(), policy, regrouped, seeds=2)
+        state = init_state(policy, regrouped, seeds=2)
+        for _ in range(3):
+            state, _ = iteration(state, TARGETS, 1.0)
+        thetas.append(np.asarray(state.theta))
+    np.testing.assert_allclose(thetas[1], thetas[0], rtol=1e-5, atol=1e-6)
+
+
 def test_bad_hyper_parameters_are_named(quadratic):
     policy, config = quadratic
     with pytest.raises(ValueError, match=r"top = 9: allowed in \[1, directions = 8\]"):
