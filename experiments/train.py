@@ -93,8 +93,8 @@ def parser(defaults: dict) -> argparse.ArgumentParser:
                         "continue regrouped, so episodes that ended stop costing: 'check' "
                         "(the step of the task set's last recovery check, after which failed "
                         "episodes have stopped), a number, 'off', or 'auto' (default: 'check' "
-                        "with --task-batch 1, else 'off': measured faster on the PNNL 300-bus "
-                        "one task per batch, slower on the 39-bus with all 9 tasks together)")
+                        "on grids of more than 100 buses, else 'off': measured faster on the "
+                        "PNNL 300-bus on CPUs and a GPU, slower on the 39-bus)")
     p.add_argument("--compact-chunks", type=int, default=4,
                    help="the episodes still running continue in chunks of 1/K of a batch, "
                         "as many as they fill")
@@ -146,7 +146,7 @@ def _train(args) -> int:
                       tasks_per_iteration=tasks_per_iteration(args, study),
                       task_batch=args.task_batch,
                       compact_after=compact_after(args.compact_after, study, args.task_set,
-                                                  args.task_batch, args.episode),
+                                                  args.episode),
                       compact_chunks=args.compact_chunks, seed=args.seed)
     config = TrainConfig(policy=args.policy, hidden=widths(args.hidden), pars=pars,
                          iterations=args.iterations, seeds=args.seeds,
@@ -174,16 +174,17 @@ def train_study(study, config, history: int | None = None, episode: float | None
     return result
 
 
-def compact_after(setting: str, study, task_set: str = "train", task_batch: int | None = None,
+def compact_after(setting: str, study, task_set: str = "train",
                   episode: float | None = None) -> int | None:
     """`ParsConfig.compact_after` of a --compact-after setting: 'check' is the task set's
-    last recovery check step (`jaxgrid.rollouts.recovery_check_step`), 'auto' is 'check' with
-    one task per batch and 'off' otherwise; None for 'off' or a step not inside the episode
-    (`episode` s, default the study's)."""
+    last recovery check step (`jaxgrid.rollouts.recovery_check_step`), 'auto' is 'check' on
+    grids of the paper's large preset (`paper_preset`: more than 100 buses) and 'off' on
+    smaller ones; None for 'off' or a step not inside the episode (`episode` s, default the
+    study's)."""
     from jaxgrid.rollouts import recovery_check_step
 
     if setting == "auto":
-        setting = "check" if task_batch == 1 else "off"
+        setting = "check" if paper_preset(study) is PAPER_PRESETS["large"] else "off"
     if setting == "off":
         return None
     if setting == "check":

@@ -288,3 +288,17 @@ def test_a_run_folder_name_does_not_depend_on_where_the_files_lie(tmp_path):
     here = key(tmp_path / "a", "network")
     assert key(tmp_path / "b", "network") == here
     assert key(tmp_path / "c", "network, changed") != here
+
+
+def test_a_gpu_trains_every_task_in_one_batch_in_the_cpu_runs_folder(study_file, tmp_path,
+                                                                      monkeypatch):
+    """On a GPU a PARS training runs all m tasks in one batch, whatever the preset's task
+    batch (a speed setting); its run folder keeps the CPU run's name, so either resumes the
+    other's checkpoint."""
+    runs = Runs(str(study_file), tmp_path, QUICK)
+    runs.preset = {**runs.preset, "task_batch": 1}
+    on_cpu = runs.pars_folder("lstm", 2)
+    assert runs.pars_config("lstm", 2)[0].pars.task_batch == 1
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert runs.pars_config("lstm", 2)[0].pars.task_batch is None
+    assert runs.pars_folder("lstm", 2) == on_cpu

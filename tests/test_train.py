@@ -186,20 +186,26 @@ def test_tasks_per_iteration_fits_the_set_or_names_the_flag():
 def test_compact_after_is_the_last_recovery_check_or_names_the_flag():
     """--compact-after 'check' is the agent step of the task set's last recovery check (the
     last fault cleared at 1.08 s, checked more than 5 s later: step 61 of 0.1 s); 'auto' is
-    'check' with one task per batch only; a step not inside the episode is off; a bad value
-    names the flag and what it allows."""
+    'check' on a grid of more than 100 buses only; a step not inside the episode is off; a bad
+    value names the flag and what it allows."""
     from types import SimpleNamespace
 
     from experiments.train import compact_after
 
     specs = [SimpleNamespace(fault_start=1.0, fault_duration=d) for d in (0.0, 0.08, 0.05)]
-    study = SimpleNamespace(
-        tasks=lambda name: specs, params=SimpleNamespace(recovery_time=5.0),
-        env=lambda episode=10.0: SimpleNamespace(config=SimpleNamespace(
-            agent_dt=0.1, n_steps=round(episode / 0.1))))
+    def grid(n_buses):
+        return SimpleNamespace(
+            tasks=lambda name: specs, params=SimpleNamespace(recovery_time=5.0),
+            points=[SimpleNamespace(case=SimpleNamespace(buses=SimpleNamespace(
+                number=np.arange(n_buses))))],
+            env=lambda episode=10.0: SimpleNamespace(config=SimpleNamespace(
+                agent_dt=0.1, n_steps=round(episode / 0.1))))
+
+    study = grid(300)
     assert compact_after("check", study) == 61
-    assert compact_after("auto", study, task_batch=1) == 61
-    assert compact_after("auto", study, task_batch=None) is None
+    assert compact_after("auto", study) == 61
+    assert compact_after("auto", grid(39)) is None
+    assert compact_after("check", grid(39)) == 61
     assert compact_after("30", study) == 30
     assert compact_after("check", study, episode=6.0) is None
     with pytest.raises(ValueError, match=r"--compact-after 'soon': allowed 'auto', 'check', "
