@@ -85,9 +85,11 @@ def parser(defaults: dict) -> argparse.ArgumentParser:
     p.add_argument("--tasks-per-iteration", type=int,
                    help=f"m (default {TASKS_PER_ITERATION}, or every task of the set if it "
                         "has fewer)")
-    p.add_argument("--task-batch", type=int, default=defaults["task_batch"],
-                   help="tasks whose rollouts run as one batch (default all m); batches run "
-                        "one after another and stop once all their episodes are done")
+    p.add_argument("--task-batch", type=int_or_auto, default="auto",
+                   help="tasks whose rollouts run as one batch, or 'auto' (default: all m on "
+                        f"a GPU, else {defaults['task_batch'] or 'all m'}); batches run one "
+                        "after another and stop once all their episodes are done")
+    p.set_defaults(preset_task_batch=defaults["task_batch"])
     p.add_argument("--compact-after", default="auto",
                    help="agent steps after which the episodes still running in a batch "
                         "continue regrouped, so episodes that ended stop costing: 'check' "
@@ -144,7 +146,7 @@ def _train(args) -> int:
     pars = ParsConfig(directions=args.directions, top=args.top, step_size=args.step_size,
                       noise=args.noise, decay=args.decay,
                       tasks_per_iteration=tasks_per_iteration(args, study),
-                      task_batch=args.task_batch,
+                      task_batch=task_batch(args.task_batch, args.preset_task_batch),
                       compact_after=compact_after(args.compact_after, study, args.task_set,
                                                   args.episode),
                       compact_chunks=args.compact_chunks, seed=args.seed)
@@ -172,6 +174,22 @@ def train_study(study, config, history: int | None = None, episode: float | None
         print(f"{out}: {log[-1]['iteration']} iterations, last mean reward "
               f"{np.mean(log[-1]['reward_mean']):.1f}, policy in {out / 'policy'}")
     return result
+
+
+def int_or_auto(value: str) -> int | str:
+    """A flag's value: 'auto' or a whole number."""
+    return value if value == "auto" else int(value)
+
+
+def task_batch(setting: int | str, preset: int | None) -> int | None:
+    """`ParsConfig.task_batch` of a --task-batch setting: a number as given; 'auto' is all m
+    tasks in one batch (None) on a GPU, which has batch width to spare, and `preset`
+    elsewhere (one task per batch on the large grids, so a task's batch stops once its
+    episodes have failed). One H100, the look-alike 300-bus: 0.34 s per iteration all in
+    one batch, 0.84 s one task per batch (benchmarks/h100/ab.json)."""
+    if setting != "auto":
+        return setting
+    return None if jax.default_backend() == "gpu" else preset
 
 
 def compact_after(setting: str, study, task_set: str = "train",

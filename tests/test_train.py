@@ -183,6 +183,25 @@ def test_tasks_per_iteration_fits_the_set_or_names_the_flag():
         tasks_per_iteration(args(9), study)
 
 
+def test_task_batch_auto_is_every_task_on_a_gpu_and_the_preset_elsewhere(monkeypatch, capsys):
+    """--task-batch 'auto' (the default) is the command's preset on CPUs (one task per batch
+    for the 300-bus command) and all m tasks in one batch (None) on a GPU; a number is kept;
+    anything else names the flag."""
+    import jax
+
+    from experiments.train import parser, task_batch
+
+    args = parser(PRESETS["train_300bus"]).parse_args([])
+    assert args.task_batch == "auto" and task_batch(args.task_batch, args.preset_task_batch) == 1
+    assert task_batch(3, 1) == 3
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert task_batch("auto", 1) is None
+    assert task_batch(3, 1) == 3
+    with pytest.raises(SystemExit):
+        parser(PRESETS["train"]).parse_args(["--task-batch", "some"])
+    assert "--task-batch: invalid int_or_auto value: 'some'" in capsys.readouterr().err
+
+
 def test_compact_after_is_the_last_recovery_check_or_names_the_flag():
     """--compact-after 'check' is the agent step of the task set's last recovery check (the
     last fault cleared at 1.08 s, checked more than 5 s later: step 61 of 0.1 s); 'auto' is

@@ -20,14 +20,13 @@ import sys
 import time
 from pathlib import Path
 
-import jax
 import numpy as np
 
 from ars.pars import ParsConfig, init_state
 from ars.train import TrainConfig, make_trainer
 from experiments.reproduce.claims import best_ppo_seed
-from experiments.train import (SMOOTHING, compact_after, paper_preset, smoothed, train_study,
-                               widths)
+from experiments.train import (SMOOTHING, compact_after, paper_preset, smoothed, task_batch,
+                               train_study, widths)
 from jaxgrid.rollouts import rollout_specs, training_problem
 from jaxgrid.study import Study, load_study, write_study
 
@@ -140,19 +139,17 @@ class Runs:
     # --- PARS ------------------------------------------------------------------------------
     def pars_config(self, policy: str, directions: int) -> tuple[TrainConfig, dict]:
         """(TrainConfig, `training_problem` arguments) of a PARS training of `policy` with
-        N = directions, b = N/2, the preset's widths and decay, the preset's task batch on
-        CPUs and all m tasks in one batch on a GPU (a speed setting, results equal to float
-        rounding, so a run folder keeps the preset's in its name; one H100, the look-alike
-        300-bus: 0.34 s per iteration against 0.84 s one task per batch,
-        benchmarks/h100/ab.json), on the large grid
-        regrouped after the recovery check (`experiments.train.compact_after`), the study's
-        history for the policy kind and its task sampling, `settings.seeds` seeds in one
-        program (the config's out and resume are `pars`'s)."""
+        N = directions, b = N/2, the preset's widths and decay, its task batch on CPUs and
+        all m tasks in one batch on a GPU (`experiments.train.task_batch`: a speed setting,
+        results equal to float rounding, so a run folder keeps the preset's in its name),
+        on the large grid regrouped after the recovery check
+        (`experiments.train.compact_after`), the study's history for the policy kind and its
+        task sampling, `settings.seeds` seeds in one program (the config's out and resume
+        are `pars`'s)."""
         s = self.settings
-        task_batch = None if jax.default_backend() == "gpu" else self.preset["task_batch"]
         pars = ParsConfig(directions=directions, top=max(1, directions // 2),
                           decay=self.preset["decay"], tasks_per_iteration=s.tasks_per_iteration,
-                          task_batch=task_batch,
+                          task_batch=task_batch("auto", self.preset["task_batch"]),
                           compact_after=compact_after("auto", self.study))
         config = TrainConfig(policy=policy, hidden=() if policy == "linear"
                              else widths(self.preset["hidden"]), pars=pars,
