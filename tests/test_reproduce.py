@@ -302,3 +302,18 @@ def test_a_gpu_trains_every_task_in_one_batch_in_the_cpu_runs_folder(study_file,
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     assert runs.pars_config("lstm", 2)[0].pars.task_batch is None
     assert runs.pars_folder("lstm", 2) == on_cpu
+
+
+def test_seconds_per_iteration_are_given_per_device(tmp_path):
+    """A training that ran on a GPU and was resumed on CPUs reports the median seconds per
+    iteration on each, so neither device's compile nor the other's speed skews the figure."""
+    from experiments.reproduce.figures import _curves
+
+    curves = {"iteration": np.arange(1, 7), "reward": np.array([[-5.0, -4, -3, -2, -2, -2]]),
+              "wall_s": np.cumsum([80.0, 1, 1, 90, 7, 8]),
+              "device": np.array(["1 × NVIDIA H200"] * 3 + ["2 × cpu"] * 3)}
+    runs = SimpleNamespace(settings=SimpleNamespace(window=2, seeds=1), pars=lambda *_: None,
+                           pars_curves=lambda _: curves, study=SimpleNamespace(name="grid"))
+    numbers = _curves(runs, [("lstm", 32, "N=32")], "LSTM", tmp_path / "curves.png")
+    assert numbers["s per iteration (1 seed in one program, median, 1 × NVIDIA H200), N=32"] == 1
+    assert numbers["s per iteration (1 seed in one program, median, 2 × cpu), N=32"] == 8

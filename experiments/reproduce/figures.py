@@ -90,7 +90,8 @@ def _save(fig, path) -> None:
 
 def _curves(runs: Runs, configs: list[tuple[str, int, str]], title: str, path) -> dict:
     """Learning curves (mean ± std over seeds) of PARS runs (policy, N, label) on one figure;
-    per run: best moving-average reward, convergence iteration, seconds per iteration."""
+    per run: best moving-average reward, convergence iteration, the median seconds per
+    iteration on each device the run used (a run resumed elsewhere lists both)."""
     plt = _plt()
     window = runs.settings.window
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -105,9 +106,11 @@ def _curves(runs: Runs, configs: list[tuple[str, int, str]], title: str, path) -
         numbers[f"best average reward, {label}"] = round(float(average.max()), 1)
         numbers[f"converged at iteration, {label}"] = convergence_iteration(
             it, mean, min(window, len(mean)))
-        wall = np.diff(curves["wall_s"], prepend=0.0)  # per iteration; the first compiles
-        numbers[f"s per iteration ({_seeds(reward.shape[0])} in one program), {label}"] = round(
-            float(wall[1:].mean() if len(wall) > 1 else wall[0]), 2)
+        wall = np.diff(curves["wall_s"], prepend=0.0)  # per iteration; a start compiles
+        for device in dict.fromkeys(curves["device"]):
+            numbers[f"s per iteration ({_seeds(reward.shape[0])} in one program, median, "
+                    f"{device}), {label}"] = round(
+                float(np.median(wall[curves["device"] == device])), 2)
     ax.set_xlabel("iteration")
     ax.set_ylabel("reward per episode (mean of the perturbed rollouts)")
     ax.set_title(f"{title} — {runs.study.name}, mean ± std over {_seeds(runs.settings.seeds)}")

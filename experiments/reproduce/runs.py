@@ -195,13 +195,15 @@ class Runs:
 
     def pars_curves(self, folder: Path) -> dict:
         """Per-seed learning curves of a PARS run: iteration (n,), reward (seeds, n) (mean over
-        the iteration's perturbed rollouts), wall_s (n,) cumulative, episodes (n,) per seed,
-        env_steps (seeds, n) cumulative agent steps simulated."""
+        the iteration's perturbed rollouts), wall_s (n,) cumulative, device (n,) where each
+        iteration ran ('COUNT × KIND'), episodes (n,) per seed, env_steps (seeds, n)
+        cumulative agent steps simulated."""
         rows = metrics_rows(folder / "metrics.jsonl")
         return {"iteration": np.array([r["iteration"] for r in rows]),
                 "reward": np.array([r["reward_mean"] for r in rows], float).reshape(
                     len(rows), -1).T,
                 "wall_s": np.cumsum([r["wall_s"] for r in rows]),
+                "device": np.array([r.get("device", "unrecorded devices") for r in rows]),
                 "episodes": np.array([r["rollouts"] for r in rows]),
                 "env_steps": np.array([r["env_steps"] for r in rows], float).reshape(
                     len(rows), -1).T}
