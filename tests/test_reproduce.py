@@ -193,14 +193,17 @@ def test_baselines_left_out_are_not_run_and_the_report_says_so(quick, tmp_path, 
 
 
 def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(tmp_path):
-    """Which row of a benchmark file fig7 takes (this study, N = directions, one device).
-    The rows carry no timing: no speed is measured or judged here."""
-    wanted = {"directions": QUICK.directions, "devices": 1, "row": "wanted"}
+    """Which row of a benchmark file fig7 takes (this study, by name or file, N = directions,
+    one device, regrouped as the training is: not on the 39-bus). The rows carry no timing:
+    no speed is measured or judged here."""
+    wanted = {"directions": QUICK.directions, "devices": 1, "compact_after": None,
+              "row": "wanted"}
     others = [{**wanted, "directions": 64, "row": "other N"},
-              {**wanted, "devices": 2, "row": "2 devices"}]
+              {**wanted, "devices": 2, "row": "2 devices"},
+              {**wanted, "compact_after": 61, "row": "regrouped"}]
     bench = {"backend": "gpu", "device_kind": "Example GPU",
              "cases": [{"case": "ieee300_fidvr", "runs": [{**wanted, "row": "other study"}]},
-                       {"case": "ieee39_fidvr", "runs": [*others, wanted]}]}
+                       {"case": "studies/ieee39_fidvr.toml", "runs": [*others, wanted]}]}
     path = tmp_path / "train.json"
     path.write_text(json.dumps(bench))
     runs = Runs("ieee39_fidvr", tmp_path, dataclasses.replace(QUICK, gpu_timing=str(path)))

@@ -312,23 +312,21 @@ class Runs:
 
     # --- timing ----------------------------------------------------------------------------
     def iteration_seconds(self, devices: int) -> float:
-        """Median seconds of one LSTM PARS iteration (N = directions, one seed) on a
-        mesh of the first `devices` CPU devices of this process, after its compile."""
+        """Median seconds of one iteration of the main LSTM training (`pars_config` with
+        N = directions, one seed) on a mesh of the first `devices` CPU devices of this
+        process, after its compile."""
         import jax
         from jax.sharding import Mesh
 
-        s = self.settings
-        config = TrainConfig(policy="lstm", hidden=widths(self.preset["hidden"]),
-                             pars=ParsConfig(directions=self.directions,
-                                             top=max(1, self.directions // 2),
-                                             tasks_per_iteration=s.tasks_per_iteration))
+        config, problem_args = self.pars_config("lstm", self.directions)
+        config = dataclasses.replace(config, seeds=None)
         mesh = Mesh(np.array(jax.devices()[:devices]), ("batch",))
-        problem = training_problem(self.study, "lstm")
+        problem = training_problem(self.study, "lstm", **problem_args)
         trainer = make_trainer(problem, config, mesh)
         state = init_state(trainer.policy, config.pars)
         state, _ = jax.block_until_ready(trainer.iteration(state, problem.tasks, problem.data))
         times = []
-        for _ in range(s.timing_iterations):
+        for _ in range(self.settings.timing_iterations):
             start = time.perf_counter()
             state, _ = jax.block_until_ready(trainer.iteration(state, problem.tasks,
                                                                problem.data))
@@ -337,13 +335,17 @@ class Runs:
 
     def gpu_row(self) -> tuple[str, dict]:
         """(label, run row) of this study's LSTM iteration with N = directions on one device,
-        from the `settings.gpu_timing` benchmark JSON; the row's `s_per_iteration` is the
-        best of its warm calls."""
+        from the `settings.gpu_timing` benchmark JSON (its case named by the study's name or
+        file), a row regrouped as the training is (`compact_after`) first; the row's
+        `s_per_iteration` is the best of its warm calls."""
         path = Path(self.settings.gpu_timing)
         report = json.loads(path.read_text())
-        rows = [r for case in report["cases"] if case["case"] == self.study.name
-                for r in case["runs"]
-                if r["directions"] == self.directions and r["devices"] == 1]
+        regrouped = self.pars_config("lstm", self.directions)[0].pars.compact_after
+        rows = sorted((r for case in report["cases"]
+                       if self.study.name in (case["case"], Path(case["case"]).stem)
+                       for r in case["runs"]
+                       if r["directions"] == self.directions and r["devices"] == 1),
+                      key=lambda r: r.get("compact_after") != regrouped)
         if report.get("backend") != "gpu" or not rows:
             raise ValueError(f"{path}: no GPU row for study {self.study.name!r} with N = "
                              f"{self.directions} on 1 device (backend "
