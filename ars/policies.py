@@ -27,6 +27,10 @@ class PolicySpec:
       kind: "linear" | "fnn" | "lstm".  obs_size, action_size: vector lengths.
       hidden: layer widths (fnn: all tanh layers; lstm: LSTM units, then tanh layers).
       action_low, action_high: the action range.
+      obs_clip: the (normalised) inputs are clipped to [−obs_clip, obs_clip] before the
+        network, or None: not clipped, as the paper's Algorithm 1. A clip keeps inputs far
+        outside what training saw (a bus that hardly moved under the training faults has a
+        tiny std) from driving the policy out of its trained range.
     """
 
     kind: str
@@ -35,6 +39,7 @@ class PolicySpec:
     hidden: tuple[int, ...] = (32, 32)
     action_low: float = -0.2
     action_high: float = 0.0
+    obs_clip: float | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -43,6 +48,8 @@ class PolicySpec:
             raise ValueError(f"hidden = {self.hidden!r}: {self.kind} needs widths >= 1")
         if not self.action_low < self.action_high:
             raise ValueError(f"action range [{self.action_low}, {self.action_high}] is empty")
+        if self.obs_clip is not None and not self.obs_clip > 0:
+            raise ValueError(f"obs_clip = {self.obs_clip!r}: allowed None or > 0")
 
 
 class _Network(nn.Module):
@@ -51,6 +58,8 @@ class _Network(nn.Module):
     @nn.compact
     def __call__(self, obs, carry):
         spec, x, layers = self.spec, obs, ()
+        if spec.obs_clip is not None:
+            x = jnp.clip(x, -spec.obs_clip, spec.obs_clip)
         if spec.kind == "fnn":
             layers = spec.hidden
         if spec.kind == "lstm":

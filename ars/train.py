@@ -39,6 +39,8 @@ class TrainConfig:
 
     Attributes:
       policy: the policy kind, "linear" | "fnn" | "lstm".  hidden: layer widths.
+      obs_clip: the policy's inputs clipped to ±obs_clip standard deviations, or None
+        (`ars.policies.PolicySpec.obs_clip`).
       pars: the iteration's hyper-parameters (its seed is the first seed).
       iterations: the run's total (when resuming: continue up to it).
       seeds: K independent trainings (seeds pars.seed ... pars.seed + K − 1) vmapped into
@@ -49,6 +51,7 @@ class TrainConfig:
 
     policy: str = "lstm"
     hidden: tuple[int, ...] = (32, 32)
+    obs_clip: float | None = None
     pars: ParsConfig = ParsConfig()
     iterations: int = 200
     seeds: int | None = None
@@ -59,6 +62,8 @@ class TrainConfig:
     def __post_init__(self):
         if self.iterations < 1 or self.checkpoint_every < 1 or (self.seeds or 1) < 1:
             raise ValueError("--iterations, --checkpoint-every and --seeds must be >= 1")
+        if self.obs_clip is not None and not self.obs_clip > 0:
+            raise ValueError(f"--obs-clip {self.obs_clip}: allowed > 0 (or leave it out)")
 
 
 class Problem(Protocol):
@@ -107,7 +112,7 @@ def make_trainer(problem: Problem, config: TrainConfig, mesh=None) -> Trainer:
     """The policy of `config` on the problem's sizes and its PARS iteration, the rollouts
     sharded over `mesh` (default: all devices)."""
     spec = PolicySpec(config.policy, problem.obs_size, problem.action_size, config.hidden,
-                      float(problem.action_low), float(problem.action_high))
+                      float(problem.action_low), float(problem.action_high), config.obs_clip)
     policy = Policy(spec)
     sample = (problem.sampler(config.pars.tasks_per_iteration)
               if problem.sampler is not None else None)
@@ -152,9 +157,10 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
             raise ValueError(f"--resume: no checkpoint in {out / 'checkpoints'}")
         state, meta = restored
         log = meta["metrics"]
-        if meta.get("seeds") != config.seeds:
-            raise ValueError(f"--resume: the run in {out} has --seeds {meta.get('seeds')}, "
-                             f"not {config.seeds}")
+        for flag, value in (("seeds", config.seeds), ("obs_clip", config.obs_clip)):
+            if meta.get(flag) != value:
+                raise ValueError(f"--resume: the run in {out} has --{flag.replace('_', '-')} "
+                                 f"{meta.get(flag)}, not {value}")
     primary = jax.process_index() == 0
     metrics_path = out / "metrics.jsonl"
     if primary:
@@ -187,7 +193,8 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
                             best=f"{np.max(row['reward_max']):.1f}", s_per_it=f"{wall:.2f}")
             bar.update(1)
             last = done == config.iterations
-            checkpoint.save(mgr, state, {"metrics": log, **run_info}, force=last, step=done)
+            checkpoint.save(mgr, state, {"metrics": log, **run_info, "obs_clip": config.obs_clip},
+                            force=last, step=done)
             if primary and (done % config.checkpoint_every == 0 or last):
                 save_policies(out / "policies" / f"{done:05d}", trainer.spec, state,
                               {**run_info, "iteration": done}, config.seeds)

@@ -73,6 +73,9 @@ def parser(defaults: dict) -> argparse.ArgumentParser:
     add_study_arguments(p, study)
     p.add_argument("--policy", default=defaults["policy"], choices=["linear", "fnn", "lstm"])
     p.add_argument("--hidden", default=defaults["hidden"], help="layer widths, e.g. 32,32")
+    p.add_argument("--obs-clip", type=float,
+                   help="clip the policy's normalised inputs to ± this many standard "
+                        "deviations (default: no clip, as the paper)")
     p.add_argument("--history", type=int,
                    help="observations stacked (default: the study's for the policy kind, "
                         "[training] history; the PNNL study files give 10 for linear and FNN, "
@@ -150,9 +153,9 @@ def _train(args) -> int:
                       compact_after=compact_after(args.compact_after, study, args.task_set,
                                                   args.episode),
                       compact_chunks=args.compact_chunks, seed=args.seed)
-    config = TrainConfig(policy=args.policy, hidden=widths(args.hidden), pars=pars,
-                         iterations=args.iterations, seeds=args.seeds,
-                         checkpoint_every=args.checkpoint_every, out=args.out,
+    config = TrainConfig(policy=args.policy, hidden=widths(args.hidden),
+                         obs_clip=args.obs_clip, pars=pars, iterations=args.iterations,
+                         seeds=args.seeds, checkpoint_every=args.checkpoint_every, out=args.out,
                          resume=args.resume)
     train_study(study, config, args.history, args.episode, args.task_set, args.task_sampling)
     return 0

@@ -110,6 +110,26 @@ def test_policies_start_at_no_control_and_stay_in_range(kind, hidden):
     assert jax.tree.structure(carry) == jax.tree.structure(policy.initial_carry())
 
 
+def test_a_clipped_policy_sees_inputs_beyond_the_clip_as_the_clip(tmp_path):
+    """obs_clip = 2: an input of 9 acts as 2, one within ±2 as itself; the clip travels with
+    a saved policy; 0 is refused naming the field."""
+    from ars.checkpoint import load_policy, save_policy
+
+    clipped, plain = (Policy(PolicySpec("fnn", 3, 2, (8,), -0.2, 0.0, clip))
+                      for clip in (2.0, None))
+    theta = jax.random.normal(jax.random.PRNGKey(2), (clipped.size,))
+    act = lambda policy, obs: np.asarray(
+        policy.apply(theta, jnp.array(obs), policy.initial_carry())[0])
+    np.testing.assert_array_equal(act(clipped, [0.5, 9.0, -1.0]), act(plain, [0.5, 2.0, -1.0]))
+    np.testing.assert_array_equal(act(clipped, [0.5, 1.5, -1.0]), act(plain, [0.5, 1.5, -1.0]))
+    assert not np.allclose(act(plain, [0.5, 9.0, -1.0]), act(plain, [0.5, 2.0, -1.0]))
+    state = init_state(clipped, ParsConfig())
+    save_policy(tmp_path, clipped.spec, state, {})
+    assert load_policy(tmp_path)[0].spec.obs_clip == 2.0
+    with pytest.raises(ValueError, match=r"obs_clip = 0.0: allowed None or > 0"):
+        PolicySpec("fnn", 3, 2, (8,), -0.2, 0.0, 0.0)
+
+
 @pytest.fixture(scope="module")
 def quadratic():
     policy = Policy(PolicySpec("linear", 2, 2, (), -0.2, 0.0))

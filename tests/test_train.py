@@ -131,6 +131,10 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
     assert "no checkpoint" in capsys.readouterr().err
     assert main(TINY + ["--resume", "--iterations", "6", "--out", str(straight)], DEFAULTS) == 2
     assert "past --iterations 6" in capsys.readouterr().err
+    assert main(TINY + ["--resume", "--obs-clip", "5", "--out", str(straight)], DEFAULTS) == 2
+    assert "has --obs-clip None, not 5.0" in capsys.readouterr().err
+    assert main(TINY + ["--obs-clip", "0", "--out", str(tmp_path)], DEFAULTS) == 2
+    assert "--obs-clip 0.0: allowed > 0" in capsys.readouterr().err
     before = (straight / "metrics.jsonl").read_text()
     assert main(TINY + ["--out", str(straight)], DEFAULTS) == 2
     assert "pass --resume" in capsys.readouterr().err

@@ -164,6 +164,8 @@ class Runs:
                   if k not in ("out", "resume")}
         for speed_only in ("compact_after", "compact_chunks"):  # folders named as before them
             inputs["pars"].pop(speed_only)
+        if inputs["obs_clip"] is None:  # named as before it
+            inputs.pop("obs_clip")
         inputs["pars"]["task_batch"] = self.preset["task_batch"]  # the same on a GPU
         return self.folder(f"pars_{policy}_N{directions}", {"config": inputs, **problem})
 
