@@ -39,25 +39,25 @@ class TrainConfig:
 
     Attributes:
       policy: the policy kind, "linear" | "fnn" | "lstm".  hidden: layer widths.
-      obs_clip: the policy's inputs clipped to ±obs_clip standard deviations, or None
-        (`ars.policies.PolicySpec.obs_clip`).
       pars: the iteration's hyper-parameters (its seed is the first seed).
       iterations: the run's total (when resuming: continue up to it).
       seeds: K independent trainings (seeds pars.seed ... pars.seed + K − 1) vmapped into
         one program, or None for one training without a seed axis.
       checkpoint_every: iterations between checkpoints (and saved policies).
       out: the output folder.  resume: continue from the last checkpoint in `out`.
+      obs_clip: the policy's inputs clipped to ±obs_clip standard deviations, or None
+        (`ars.policies.PolicySpec.obs_clip`).
     """
 
     policy: str = "lstm"
     hidden: tuple[int, ...] = (32, 32)
-    obs_clip: float | None = None
     pars: ParsConfig = ParsConfig()
     iterations: int = 200
     seeds: int | None = None
     checkpoint_every: int = 10
     out: str = "runs/study"
     resume: bool = False
+    obs_clip: float | None = None
 
     def __post_init__(self):
         if self.iterations < 1 or self.checkpoint_every < 1 or (self.seeds or 1) < 1:
