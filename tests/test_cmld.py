@@ -39,7 +39,8 @@ from jaxgrid.io.raw import RawWarning, read_raw
 from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.models.base import LoadPorts, LoadSite, ModelError
 from jaxgrid.models.cmld import Cmldblu2, CompositeWarning, _electronic_fraction, read_records
-from jaxgrid.models.cmld_init import expand, initialise, internal_buses
+from jaxgrid.models.cmld_init import (expand, floor_scales, floor_steps, initialise,
+                                      internal_buses)
 from jaxgrid.models.options import CompositeOptions, MotorOptions
 from jaxgrid.powerflow import solve
 from jaxgrid.models.induction import Cim5bl
@@ -202,6 +203,40 @@ def test_load_report_names_the_initialisation(system):
     p = system.loads[0].params
     assert p["sbl"][0] == pytest.approx(0.8)
     assert abs(system.v0[2]) == pytest.approx(1.0325, abs=0.5 * 0.00625 + 0.002)
+
+
+def test_floor_bisection_takes_the_steps_one_by_one_stepping_takes():
+    # spec §6 step 6 steps the feeder impedance down 1 % at a time until |V_L| >= the floor;
+    # floor_steps bisects; on a |V_L| rising as the scale falls both stop at the same step
+    scales = floor_scales(0.01)
+    assert len(scales) == 100 and scales[1] == 1.0 - 0.01 and scales[-1] == pytest.approx(0.01)
+    v_at_one = np.array([0.97, 0.949, 0.90, 0.79, 0.30])  # the last never reaches 0.95
+
+    def v_load(scale):
+        return v_at_one + 0.3 * (1.0 - scale)
+
+    stepped = [next((k for k, s in enumerate(scales) if v_load(np.full(5, s))[i] >= 0.95),
+                    len(scales) - 1) for i in range(5)]
+    assert stepped == [0, 1, 17, 54, 99]
+    np.testing.assert_array_equal(floor_steps(v_load, v_load(1.0), scales, 0.95), stepped)
+
+
+def test_voltage_floor_scales_the_feeder_by_the_fewest_steps(tmp_path):
+    # a feeder of 3 × bus 1's impedance starts |V_L| at 0.845 p.u.; the floor scales it by
+    # 0.45: with 0.45 × that impedance and no floor |V_L| >= 0.95, with 0.46 × it < 0.95
+    def v_load(factor, v_floor):
+        cons = cons_with(rfdr=0.04 * factor, xfdr=0.04 * factor)
+        (tmp_path / "u.dyr").write_text(record(cons))
+        init = initialise(read_records(read_dyr(tmp_path / "u.dyr").records),
+                          np.array([1.0 + 0.2j]), np.array([np.exp(0.1j)]), SBASE, F_NOM,
+                          CompositeOptions(v_floor=v_floor), MotorOptions(), ("unit",))
+        return abs(init.v_load[0]), init.notes
+
+    v_floored, notes = v_load(3.0, 0.95)
+    assert any("scaled to 0.45 × (RFDR + jXFDR)" in n for n in notes), notes
+    assert v_load(3.0, 0.0)[0] < 0.85
+    assert v_load(3.0 * 0.45, 0.0)[0] == pytest.approx(v_floored, abs=NET_TOL) and v_floored >= 0.95
+    assert v_load(3.0 * 0.46, 0.0)[0] < 0.95
 
 
 # --------------------------------------------------------------------------- #

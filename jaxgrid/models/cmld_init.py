@@ -204,6 +204,35 @@ def _tan(pf):
     return np.tan(np.arccos(np.abs(pf))) * np.where(pf < 0, -1.0, 1.0)
 
 
+def floor_scales(step: float) -> np.ndarray:
+    """The feeder-impedance scales of the voltage floor (spec §6 step 6): 1, 1 − step, ...
+    by repeated subtraction (as a tool stepping down would), while above `step`, at most
+    round(1/step) steps."""
+    scales = [1.0]
+    while len(scales) <= round(1.0 / step) and scales[-1] > step:
+        scales.append(scales[-1] - step)
+    return np.array(scales)
+
+
+def floor_steps(v_load, v_first: np.ndarray, scales: np.ndarray,
+                v_floor: float) -> np.ndarray:
+    """(n,) int: per load, the fewest steps along `scales` (`floor_scales`) that lift |V_L|
+    to `v_floor` p.u. (the last step where none does), given v_load(scale (n,)) -> |V_L|
+    (n,) and v_first = v_load(1).
+
+    |V_L| rises as the feeder impedance falls, so the steps are bisected (about log2 of
+    their count solves, for all loads at once) rather than taken one by one.
+    """
+    last = len(scales) - 1
+    lo = np.zeros(v_first.shape, int)  # fails (|V_L| < v_floor) where lo < hi
+    hi = np.where(v_first < v_floor, last, 0)  # passes, or is the last step
+    while (hi - lo > 1).any():
+        mid = np.where(hi - lo > 1, (lo + hi) // 2, hi)
+        lifted = v_load(scales[mid]) >= v_floor
+        lo, hi = np.where(lifted, lo, mid), np.where(lifted, mid, hi)
+    return hi
+
+
 def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: float,
                options: CompositeOptions, motors: MotorOptions,
                labels: Sequence[str]) -> Initialised:
@@ -256,15 +285,13 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
                              f"(reactive mismatch {g1[bad[0]]:.3g} p.u.)")
         return b1
 
-    scale = np.ones(n)
+    def v_load(scale):
+        return np.abs(feeder(solve_bf(scale), scale)[0])
+
+    v_first = v_load(np.ones(n))
+    scales = floor_scales(options.floor_step)
+    scale = scales[floor_steps(v_load, v_first, scales, options.v_floor)]
     bf = solve_bf(scale)
-    v_first = np.abs(feeder(bf, scale)[0])
-    for _ in range(int(round(1.0 / options.floor_step))):
-        low = (np.abs(feeder(bf, scale)[0]) < options.v_floor) & (scale > options.floor_step)
-        if not low.any():
-            break
-        scale = np.where(low, scale - options.floor_step, scale)
-        bf = solve_bf(scale)
     v_l, s_l = feeder(bf, scale)
     p_l = s_l.real
     for k in np.flatnonzero(scale < 1.0):
