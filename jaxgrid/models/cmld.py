@@ -64,9 +64,10 @@ switches). Each is the InterPSS reading where one is known, which reproduces the
      difference of motor D's P at V_L0 from FmD·P_L is given to the static load (reported).
 Other choices: the voltage floor (spec §6 step 6) scales the feeder impedance down in
 steps of `floor_step` (InterPSS: 1 %) until |V_L| >= `v_floor` (the fewest steps, found by
-bisection: `cmld_init.floor_steps`); the tap is not raised first. Every adjustment is in the load report. Shedding (spec §9, `shedding`) is end-use
-by default: the load-bus slot's connected fraction scales every component and the load-end
-shunt; states are untouched. "feeder" scales the whole feeder instead (`CmldFeederShed`).
+bisection: `cmld_init.floor_steps`); the tap is not raised first. Every adjustment is in
+the load report. Shedding (spec §9, `shedding`) is end-use by default: the load-bus slot's
+connected fraction scales every component and the load-end shunt; states are untouched.
+"feeder" scales the whole feeder instead (`CmldFeederShed`).
 CMLDBLU1 (132 CONs) has no Frcel; it is
 taken as 0 (dropped electronic load does not come back) and reported. Below
 `STATIC_V_BREAK` the static load becomes a constant admittance (its value at the break),

@@ -288,10 +288,12 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
     def v_load(scale):
         return np.abs(feeder(solve_bf(scale), scale)[0])
 
-    v_first = v_load(np.ones(n))
+    bf = solve_bf(np.ones(n))
+    v_first = np.abs(feeder(bf, 1.0)[0])
     scales = floor_scales(options.floor_step)
     scale = scales[floor_steps(v_load, v_first, scales, options.v_floor)]
-    bf = solve_bf(scale)
+    if (scale < 1.0).any():  # else the first solve stands
+        bf = solve_bf(scale)
     v_l, s_l = feeder(bf, scale)
     p_l = s_l.real
     for k in np.flatnonzero(scale < 1.0):
