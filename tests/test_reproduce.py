@@ -120,6 +120,22 @@ def test_generalisation_and_the_exported_policy(quick, study_file, tmp_path):
         quick / "REPORT.md").read_text()
 
 
+def test_a_given_policy_is_kept_and_otherwise_the_trained_one_is_exported(quick, tmp_path):
+    """With --policy the experiments use the given policy, so OUT/policy is not replaced by
+    the main training's best seed (a redraw passing `--policy OUT/policy` keeps it); without
+    it, the finished training's best seed is copied there."""
+    out = tmp_path / "out"
+    shutil.copytree(quick, out)
+    info_path = out / "policy" / "policy.json"
+    info_path.write_text(json.dumps({**json.loads(info_path.read_text()), "given": True}))
+    given = Runs(str(out / "study.toml"), out,
+                 dataclasses.replace(QUICK, policy=str(out / "policy")))
+    assert given.export_policy() is None
+    assert json.loads(info_path.read_text())["given"]
+    assert Runs(str(out / "study.toml"), out, QUICK).export_policy() == out / "policy"
+    assert "given" not in json.loads(info_path.read_text())
+
+
 def test_the_report_says_when_its_policy_is_from_an_unfinished_training(quick, tmp_path):
     """A policy copied from a checkpoint of a training that stopped short (its policy.json:
     iteration < iterations) is named as such at the top of the report."""

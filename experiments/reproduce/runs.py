@@ -230,9 +230,11 @@ class Runs:
 
     def export_policy(self) -> Path | None:
         """Copy the best seed of the finished main LSTM training to OUT/policy (loadable by
-        `experiments.evaluate --controller policy:OUT/policy`); None if it is not trained."""
+        `experiments.evaluate --controller policy:OUT/policy`); None if it is not trained, or
+        if a policy was given (`settings.policy`: the experiments used that one, so OUT/policy
+        is left as it is, e.g. when a redraw passes `--policy OUT/policy`)."""
         folder = self.pars_folder("lstm", self.directions)
-        if not self.pars_finished(folder):
+        if self.settings.policy or not self.pars_finished(folder):
             return None
         target = self.out / "policy"
         shutil.rmtree(target, ignore_errors=True)
