@@ -233,8 +233,10 @@ class Runs:
         `experiments.evaluate --controller policy:OUT/policy`); None if it is not trained, or
         if a policy was given (`settings.policy`: the experiments used that one, so OUT/policy
         is left as it is, e.g. when a redraw passes `--policy OUT/policy`)."""
+        if self.settings.policy:
+            return None
         folder = self.pars_folder("lstm", self.directions)
-        if self.settings.policy or not self.pars_finished(folder):
+        if not self.pars_finished(folder):
             return None
         target = self.out / "policy"
         shutil.rmtree(target, ignore_errors=True)
