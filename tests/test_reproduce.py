@@ -122,8 +122,9 @@ def test_generalisation_and_the_exported_policy(quick, study_file, tmp_path):
 
 def test_a_given_policy_is_kept_and_otherwise_the_trained_one_is_exported(quick, tmp_path):
     """With --policy the experiments use the given policy, so OUT/policy is not replaced by
-    the main training's best seed (a redraw passing `--policy OUT/policy` keeps it); without
-    it, the finished training's best seed is copied there."""
+    the main training's best seed (a redraw passing `--policy OUT/policy` keeps it); nor is
+    it when no experiment evaluated the trained policy (a training-curve redraw); when one
+    did, the finished training's best seed is copied there."""
     out = tmp_path / "out"
     shutil.copytree(quick, out)
     info_path = out / "policy" / "policy.json"
@@ -132,7 +133,12 @@ def test_a_given_policy_is_kept_and_otherwise_the_trained_one_is_exported(quick,
                  dataclasses.replace(QUICK, policy=str(out / "policy")))
     assert given.export_policy() is None
     assert json.loads(info_path.read_text())["given"]
-    assert Runs(str(out / "study.toml"), out, QUICK).export_policy() == out / "policy"
+    curves_only = Runs(str(out / "study.toml"), out, QUICK)
+    assert curves_only.export_policy() is None
+    assert json.loads(info_path.read_text())["given"]
+    evaluating = Runs(str(out / "study.toml"), out, QUICK)
+    evaluating.main_policy()
+    assert evaluating.export_policy() == out / "policy"
     assert "given" not in json.loads(info_path.read_text())
 
 

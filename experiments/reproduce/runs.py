@@ -128,6 +128,7 @@ class Runs:
         self.preset = paper_preset(self.study)
         self.directions = settings.directions or self.preset["directions"]
         self.trainings: set[Path] = set()  # PARS / PPO run folders used since last cleared
+        self.main_policy_evaluated = False  # an experiment here evaluated the trained one
 
     def folder(self, kind: str, inputs: dict) -> Path:
         """OUT/runs/KIND-HASH for `inputs` (with the study), and its inputs.json."""
@@ -226,19 +227,23 @@ class Runs:
         policy, or the best seed of the LSTM training with N = directions."""
         if self.settings.policy:
             return f"policy:{self.settings.policy}"
+        self.main_policy_evaluated = True
         return self.best_seed(self.pars("lstm", self.directions))
 
     def export_policy(self) -> Path | None:
         """Copy the best seed of the finished main LSTM training to OUT/policy (loadable by
-        `experiments.evaluate --controller policy:OUT/policy`); None if it is not trained, or
-        if a policy was given (`settings.policy`: the experiments used that one, so OUT/policy
-        is left as it is, e.g. when a redraw passes `--policy OUT/policy`)."""
-        if self.settings.policy:
+        `experiments.evaluate --controller policy:OUT/policy`); None if it is not trained, if
+        a policy was given (`settings.policy`: the experiments used that one, so OUT/policy
+        is left as it is, e.g. when a redraw passes `--policy OUT/policy`), or if OUT/policy
+        exists and no experiment here evaluated the trained one (a training-curve redraw such
+        as `--only fig6b` keeps the policy that the report's evaluations were measured with)."""
+        target = self.out / "policy"
+        if self.settings.policy or (
+                (target / "policy.json").is_file() and not self.main_policy_evaluated):
             return None
         folder = self.pars_folder("lstm", self.directions)
         if not self.pars_finished(folder):
             return None
-        target = self.out / "policy"
         shutil.rmtree(target, ignore_errors=True)
         shutil.copytree(self.best_seed_folder(folder), target)
         return target
