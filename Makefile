@@ -16,7 +16,7 @@ run:  ## the main job on the built-in default case: PARS training on the 39-bus 
 test:  ## the test suite: test files shared by 2 workers, 2 simulated CPU devices each (tests/conftest.py)
 	$(PY) -m pytest -q -n 2 --dist loadfile
 
-bench:  ## benchmarks; figures go to benchmarks/cpu/*.json (GPU records: benchmarks/h100/)
+bench:  ## benchmarks; figures go to benchmarks/cpu/*.json (GPU records: benchmarks/h100/, h200/)
 	$(PY) -m experiments.bench.powerflow --out benchmarks/cpu/powerflow.json
 	$(PY) -m experiments.bench.sim --out benchmarks/cpu/sim.json
 	$(PY) -m experiments.bench.sim --cases ieee39_fidvr ieee300_fidvr --no-andes \
@@ -30,6 +30,7 @@ bench:  ## benchmarks; figures go to benchmarks/cpu/*.json (GPU records: benchma
 	$(PY) -m experiments.bench.speedup --rounds 1 --out benchmarks/cpu/speedup.json
 	$(PY) -m experiments.bench.iterations --out benchmarks/cpu/iterations.json
 	$(PY) -m experiments.bench.scale --out benchmarks/cpu/scale.json
+	$(PY) -m experiments.bench.ppo --out benchmarks/cpu/ppo.json
 
 reproduce:  ## the paper's 39-bus figures and tables, REPORT.md in results/reproduce39
 	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.reproduce \

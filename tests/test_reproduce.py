@@ -6,8 +6,10 @@ the environment steps actually simulated, and the convergence rule and the side 
 inputs whose answer is known by hand."""
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
+import re
 import shutil
 from types import SimpleNamespace
 
@@ -18,7 +20,7 @@ import pytest
 from experiments.reproduce import claims
 from experiments.reproduce.figures import EXPERIMENTS, PAPER
 from experiments.reproduce.runs import QUICK, Runs, convergence_iteration, study_key
-from experiments.reproduce.harness import main, run, write_report
+from experiments.reproduce.harness import _ppo_flags, main, run, write_report
 
 # The built-in 39-bus study at two load levels: trained and tested at the first, the second
 # the generalisation set's (quick settings keep 2 fault buses and 1 duration of each set).
@@ -188,6 +190,21 @@ def test_a_sweep_given_on_the_command_line_reuses_the_main_training(quick, tmp_p
     with pytest.raises(SystemExit):
         main(["--quick", "--out", str(out), "--only", "fig9", "--sweep-large", "1,64"])
     assert "argument --sweep-large: '1,64'" in capsys.readouterr().err
+
+
+def test_ppo_flags_are_train_ppo_flags_the_harness_does_not_set_itself(capsys):
+    """--ppo-flags: words of experiments.train_ppo's flags that make a valid PPO
+    configuration; the ones the harness sets per training, unknown ones (abbreviations too)
+    and a configuration PPOConfig refuses are errors of the flag, before anything runs."""
+    assert _ppo_flags("--envs 500 --minibatches 400") == ("--envs", "500", "--minibatches", "400")
+    for flags, why in [("--seed 3", "['--seed'] not allowed"),
+                       ("--env-s 9", "['--env-s', '9'] not allowed"),
+                       ("--envs 500 --minibatches 32", "a divisor of envs·rollout_steps")]:
+        with pytest.raises(SystemExit):
+            main(["--quick", "--ppo-flags", flags])
+        assert f"argument --ppo-flags: '{flags}': " in capsys.readouterr().err
+        with pytest.raises(argparse.ArgumentTypeError, match=re.escape(why)):
+            _ppo_flags(flags)
 
 
 def test_baselines_left_out_are_not_run_and_the_report_says_so(quick, tmp_path, capsys):

@@ -1,8 +1,8 @@
 """Benchmarks, one command each: `python -m experiments.bench.<name>`.
 
 `make bench` writes their JSON reports to benchmarks/cpu/; the GPU records are kept beside
-it in benchmarks/h100/. `timing` holds what they share: the timer, the device sweep and the
-report writer.
+it in benchmarks/h100/ and benchmarks/h200/. `timing` holds what they share: the timer, the
+device sweep and the report writer.
 
 Importing the package asks XLA for two host CPU devices, so that a benchmark can shard its
 batch over 1 and 2 devices; this runs before any benchmark module imports JAX.

@@ -3,7 +3,7 @@
     python -m experiments.reproduce --study ieee39_fidvr|FILE.toml --out results/repro39 \
         [--only fig6a,fig8,...] [--quick] [--iterations N] [--seeds K] [--ppo-seeds K]
         [--directions N] [--policy DIR/policy] [--ppo-policy DIR/policy]
-        [--gpu-timing BENCH.json] [--skip-baselines mpc,ppo]
+        [--gpu-timing BENCH.json] [--skip-baselines mpc,ppo] [--ppo-flags "--envs 500 ..."]
     python -m experiments.reproduce --study studies/ieee39_pnnl.toml --out results/pnnl39
     python -m experiments.reproduce --study studies/ieee300_pnnl.toml --out results/pnnl300
     make reproduce
@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -158,6 +159,31 @@ def _directions(text: str) -> tuple[int, ...]:
     return values
 
 
+# experiments.train_ppo flags the harness sets itself (per training), refused in --ppo-flags
+PPO_FLAGS_SET_HERE = ("--study", "--raw", "--dyr", "--task-config", "--sim-config",
+                      "--load-levels", "--env-steps", "--seed", "--out", "--resume")
+
+
+def _ppo_flags(text: str) -> tuple[str, ...]:
+    """'--envs 500 --minibatches 400' -> its words, once `experiments.train_ppo` accepts them
+    as a configuration (argparse names --ppo-flags otherwise)."""
+    from experiments.train_ppo import config_from_args, parser
+
+    words, train_ppo = tuple(shlex.split(text)), parser()
+    train_ppo.allow_abbrev = False  # '--env-s' must not slip in as --env-steps
+    args, unknown = train_ppo.parse_known_args(words)
+    refused = [w for w in words if w.split("=")[0] in PPO_FLAGS_SET_HERE]
+    if unknown or refused:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: {unknown or refused} not allowed (experiments.train_ppo's flags, "
+            f"less those the harness sets: {', '.join(PPO_FLAGS_SET_HERE)})")
+    try:
+        config_from_args(args)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(f"{text!r}: {err}") from None
+    return words
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m experiments.reproduce",
                                 description=__doc__.split("\n")[0])
@@ -185,9 +211,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--skip-baselines", help="comma-separated baselines to leave out of "
                    "fig10_11, fig12, tab3 and fig13: mpc, ppo (for a machine that cannot "
                    "afford them; the report says so)")
+    p.add_argument("--ppo-flags", type=_ppo_flags, help="experiments.train_ppo flags for the "
+                   "PPO trainings, e.g. '--envs 500 --minibatches 400' (default: Table II with "
+                   "RLlib's defaults, 40 environments)")
     args = p.parse_args(argv)
     overrides = {k: v for k, v in (("iterations", args.iterations), ("seeds", args.seeds),
-                                   ("ppo_seeds", args.ppo_seeds),
+                                   ("ppo_seeds", args.ppo_seeds), ("ppo_flags", args.ppo_flags),
                                    ("directions", args.directions), ("policy", args.policy),
                                    ("ppo_policy", args.ppo_policy),
                                    ("sweep", args.sweep), ("sweep_large", args.sweep_large),

@@ -50,7 +50,7 @@ class Settings:
       ppo_seeds: PPO trainings (the best one is fig12's and fig13's).  ppo_env_steps: per
         PPO training, None for as many as one PARS training could take (iterations × 2N·m
         episodes × agent steps; failed episodes stop early, so PARS takes fewer).
-      ppo_flags: extra flags.
+      ppo_flags: extra `experiments.train_ppo` flags of the PPO trainings (`--ppo-flags`).
       mpc: MPC options (`baselines.mpc.parse_options`).
       timing_iterations: iterations timed per device count (fig7).  processes: fig7's
         `jax.distributed` process count (0: none).
