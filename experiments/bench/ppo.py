@@ -48,7 +48,7 @@ def bench_shape(study, config: PPOConfig, seeds: int, iterations: int, repeats: 
     trainings vmapped in one program."""
     adapter, params = gymnax_env(study)
     algo = make_ppo(adapter, params, config)
-    chunk = jax.vmap(make_chunk(), in_axes=(None, 0, None))
+    chunk = jax.jit(jax.vmap(make_chunk(), in_axes=(None, 0, None)))  # traced once
     keys = jax.random.split(jax.random.PRNGKey(config.seed), seeds)
     state = host_state(jax.vmap(algo.init_state)(keys))
     state, first = timed(lambda: chunk(algo, state, jnp.int32(iterations)))
