@@ -254,9 +254,11 @@ def test_gpu_timing_is_read_from_a_gpu_benchmark_and_refused_from_a_cpu_one(tmp_
         runs.gpu_row()
 
 
-def test_unknown_experiments_are_named(tmp_path, capsys):
+def test_unknown_experiments_and_a_ppo_budget_below_one_step_are_named(tmp_path, capsys):
     assert main(["--quick", "--only", "fig6a,fig99", "--out", str(tmp_path)]) == 2
     assert "fig99" in capsys.readouterr().err
+    assert main(["--quick", "--ppo-env-steps", "0", "--out", str(tmp_path)]) == 2
+    assert "--ppo-env-steps 0: must be at least 1" in capsys.readouterr().err
 
 
 def test_convergence_rule_on_curves_known_by_hand():

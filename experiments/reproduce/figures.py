@@ -331,7 +331,8 @@ def fig10_11(runs: Runs, path) -> dict:
     numbers["environment steps, PPO"] = int(ppo_steps[-1])
     return {"numbers": numbers, "settings": f"PARS LSTM N = {runs.directions}, "
             f"{s.iterations} iterations × {_seeds(s.seeds)} in one program; PPO {s.ppo_seeds} "
-            f"seeds × {_ppo_steps(runs)} env steps (Table II settings), one after another; "
+            f"seeds × {_ppo_steps(runs)} env steps (Table II settings"
+            f"{'; ' + ' '.join(s.ppo_flags) if s.ppo_flags else ''}), one after another; "
             "wall times per seed"}
 
 

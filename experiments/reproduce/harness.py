@@ -56,6 +56,9 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
     if wrong:
         raise ValueError(f"--skip-baselines {','.join(wrong)}: unknown; it takes "
                          f"{', '.join(BASELINES_SKIPPABLE)} (UVLS is always in)")
+    if settings.ppo_env_steps is not None and settings.ppo_env_steps < 1:
+        raise ValueError(f"--ppo-env-steps {settings.ppo_env_steps}: must be at least 1 "
+                         "(environment steps per PPO training)")
     runs = Runs(study, out, settings)
     results = {}
     for name, experiment in EXPERIMENTS.items():
@@ -195,6 +198,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=int, help="PARS seeds per configuration")
     p.add_argument("--ppo-seeds", type=int, help="PPO trainings for fig10_11 (the best one "
                                                   "is fig12's and fig13's)")
+    p.add_argument("--ppo-env-steps", type=int, help="environment steps per PPO training "
+                   "(default: as many as one PARS training, fig11's comparison)")
     p.add_argument("--directions", type=int, help="N of the main policy (default: the "
                                                    "paper's, 16 or 128 by grid size)")
     p.add_argument("--sweep", type=_directions, help="comma-separated N of fig6b (default "
@@ -217,6 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     overrides = {k: v for k, v in (("iterations", args.iterations), ("seeds", args.seeds),
                                    ("ppo_seeds", args.ppo_seeds), ("ppo_flags", args.ppo_flags),
+                                   ("ppo_env_steps", args.ppo_env_steps),
                                    ("directions", args.directions), ("policy", args.policy),
                                    ("ppo_policy", args.ppo_policy),
                                    ("sweep", args.sweep), ("sweep_large", args.sweep_large),
