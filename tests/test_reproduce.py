@@ -270,6 +270,9 @@ def test_convergence_rule_on_curves_known_by_hand():
     # a ramp to -100 comes within 2 % (2) of its final value at -102, iteration 98
     ramp = -200.0 + iterations.astype(float)
     assert convergence_iteration(iterations, ramp, 1) == 98
+    # with a 10-iteration window it is still rising at its end: its average comes within 2 %
+    # of its final -104.5 from iteration 98 on, 3 averages, fewer than a window
+    assert convergence_iteration(iterations, ramp, 10) is None, "settles in its last window"
     assert convergence_iteration(iterations[:9], step[:9], 5) is None, "under two windows"
 
 

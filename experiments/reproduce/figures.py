@@ -17,6 +17,9 @@ from experiments.reproduce import claims
 from experiments.reproduce.runs import Runs, convergence_iteration, metrics_rows
 from experiments.train import smoothed
 
+# what a convergence row holds for a run that settles only in its last window, if at all
+NOT_SETTLED = "not settled"
+
 PAPER = {
     "fig6a": {"title": "Learning curves of linear, FNN and LSTM policies (N = 16, 5 seeds)",
               "case": "IEEE 39-bus", "settings": "N = 16, b = 8, m = 9, 5 seeds",
@@ -104,8 +107,8 @@ def _curves(runs: Runs, configs: list[tuple[str, int, str]], title: str, path) -
         ax.fill_between(it, mean - std, mean + std, color=line.get_color(), alpha=0.2)
         average = smoothed(mean, min(window, len(mean)))
         numbers[f"best average reward, {label}"] = round(float(average.max()), 1)
-        numbers[f"converged at iteration, {label}"] = convergence_iteration(
-            it, mean, min(window, len(mean)))
+        settled = convergence_iteration(it, mean, min(window, len(mean)))
+        numbers[f"converged at iteration, {label}"] = NOT_SETTLED if settled is None else settled
         wall = np.diff(curves["wall_s"], prepend=0.0)  # per iteration; a start compiles
         for device in dict.fromkeys(curves["device"]):
             numbers[f"s per iteration ({_seeds(reward.shape[0])} in one program, median, "
@@ -298,7 +301,7 @@ def fig10_11(runs: Runs, path) -> dict:
     curves = {"PARS": (pars_wall, pars["env_steps"].mean(0), pars["reward"]),
               "PPO": (ppo_wall, ppo_steps, ppo_reward)}
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    numbers = {}
+    numbers, to_convergence = {}, {}
     for label, (wall, env_steps, reward) in curves.items():
         kept = np.isfinite(reward).any(0)  # PPO chunks in which no episode ended are left out
         wall, env_steps, reward = wall[kept], env_steps[kept], reward[:, kept]
@@ -312,13 +315,13 @@ def fig10_11(runs: Runs, path) -> dict:
         settled = convergence_iteration(np.arange(len(mean)), mean, window)
         numbers[f"final training reward, {label}"] = round(float(smoothed(mean, window)[-1]),
                                                            1)
-        numbers[f"wall s to convergence, {label}"] = (None if settled is None
-                                                     else round(float(wall[settled]), 1))
+        to_convergence[label] = None if settled is None else round(float(wall[settled]), 1)
+        numbers[f"wall s to convergence, {label}"] = (NOT_SETTLED if settled is None
+                                                     else to_convergence[label])
         numbers[f"wall s in all, {label}"] = round(float(wall[-1]), 1)
-    if None not in (numbers["wall s to convergence, PARS"], numbers["wall s to convergence, PPO"]):
+    if None not in to_convergence.values():
         numbers["wall-time speed-up to convergence, PPO / PARS"] = round(
-            numbers["wall s to convergence, PPO"] / max(numbers["wall s to convergence, PARS"],
-                                                      1e-9), 2)
+            to_convergence["PPO"] / max(to_convergence["PARS"], 1e-9), 2)
     axes[0].set_xlabel("wall time per seed (s)")
     axes[1].set_xlabel("environment steps (agent steps of 0.1 s)")
     axes[0].set_ylabel("training reward per episode")

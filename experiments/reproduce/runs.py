@@ -401,15 +401,16 @@ class Runs:
 def convergence_iteration(iterations: np.ndarray, reward: np.ndarray, window: int,
                           tolerance: float = 0.02) -> int | None:
     """The study's rule: the first iteration from which the `window`-iteration moving
-    average of `reward` (n,) stays within `tolerance` (relative) of its final value; None
-    for a run shorter than two windows (too short to tell)."""
+    average of `reward` (n,) stays within `tolerance` (relative) of its final value, for at
+    least `window` averages to the run's end; None for a run shorter than two windows (too
+    short to tell) or one that settles only in its last window (still changing)."""
     if len(reward) < 2 * window:
         return None
     average = smoothed(np.asarray(reward, float), window)
     inside = np.abs(average - average[-1]) <= tolerance * abs(average[-1])
     outside = np.flatnonzero(~inside)
     first = 0 if outside.size == 0 else int(outside[-1]) + 1
-    return int(iterations[window - 1 + first]) if first < len(average) else None
+    return int(iterations[window - 1 + first]) if len(average) - first >= window else None
 
 
 def _sized(study: Study, settings: Settings) -> Study:
