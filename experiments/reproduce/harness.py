@@ -4,6 +4,7 @@
         [--only fig6a,fig8,...] [--quick] [--iterations N] [--seeds K] [--ppo-seeds K]
         [--directions N] [--policy DIR/policy] [--ppo-policy DIR/policy]
         [--gpu-timing BENCH.json] [--skip-baselines mpc,ppo] [--ppo-flags "--envs 500 ..."]
+        [--ppo-env-steps STEPS]
     python -m experiments.reproduce --study studies/ieee39_pnnl.toml --out results/pnnl39
     python -m experiments.reproduce --study studies/ieee300_pnnl.toml --out results/pnnl300
     make reproduce
