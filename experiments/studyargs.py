@@ -3,13 +3,14 @@
     --study NAME|FILE                       a built-in study or a study TOML file
     --raw R1 [R2 ...] --dyr D [--task-config J] [--sim-config S]   a study from files
     --load-levels L1 [L2 ...]               operating points of a built-in study
+    --study FILE --raw R1 [R2 ...]          a study file's settings at these operating points
 """
 from __future__ import annotations
 
 import argparse
 
 from jaxgrid import cases
-from jaxgrid.study import Study, builtin, from_files, load_study
+from jaxgrid.study import Study, at_points, builtin, from_files, load_study
 
 
 def add_study_arguments(parser: argparse.ArgumentParser, default: str | None) -> None:
@@ -17,7 +18,8 @@ def add_study_arguments(parser: argparse.ArgumentParser, default: str | None) ->
     group = parser.add_argument_group("study")
     group.add_argument("--study", default=None,
                        help=f"built-in study name or study TOML file (default: {default})")
-    group.add_argument("--raw", nargs="+", help="RAW files, one per operating point")
+    group.add_argument("--raw", nargs="+", help="RAW files, one per operating point (with "
+                       "--study FILE: that study's settings at these points)")
     group.add_argument("--dyr", help="DYR file (with --raw)")
     group.add_argument("--task-config", help="PNNL task JSON (with --raw)")
     group.add_argument("--sim-config", help="PNNL simulation JSON (with --raw)")
@@ -29,9 +31,15 @@ def add_study_arguments(parser: argparse.ArgumentParser, default: str | None) ->
 def study_from_args(args: argparse.Namespace, fallback: str | None = None) -> Study:
     """The study the flags name; `fallback` (e.g. a run folder's study.toml) before the
     parser's default when neither --study nor --raw is given."""
+    if args.raw and args.study:
+        if args.dyr or args.task_config or args.sim_config or args.load_levels:
+            raise ValueError("--study with --raw takes the study's settings at the RAW files' "
+                             "operating points: drop --dyr, --task-config, --sim-config and "
+                             "--load-levels")
+        return at_points(load_study(args.study), args.raw)
     if args.raw:
-        if args.study or args.load_levels:
-            raise ValueError("--raw builds a study from files: drop --study and --load-levels")
+        if args.load_levels:
+            raise ValueError("--raw builds a study from files: drop --load-levels")
         if not args.dyr:
             raise ValueError("--raw needs --dyr")
         return from_files(args.raw, args.dyr, args.task_config, args.sim_config)

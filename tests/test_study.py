@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -18,7 +19,8 @@ from baselines.controllers import no_control
 from jaxgrid.env import EnvParams
 from jaxgrid.io.raw import read_raw
 from jaxgrid.rollouts import at_point, rollout_specs, stratified_sampler
-from jaxgrid.study import CompileSettings, builtin, from_files, read_study, write_study
+from jaxgrid.study import (CompileSettings, at_points, builtin, from_files, read_study,
+                           write_study)
 from jaxgrid.tasks import TaskSet, TaskSpec
 
 BASE = "ieee39/IEEE39bus_multiloads_xfmr4_smallX_v30.raw"
@@ -28,6 +30,7 @@ DYR = "ieee39/IEEE39bus_3AC.dyr"
 TASK = "ieee39/IEEE39_RL_loadShedding_3motor_continuous.json"
 SIM = "ieee39/IEEE39_dyn_config.json"
 EPISODE = 3.0  # s
+REPO = Path(__file__).parent.parent
 # Per-point runs against one multi-point batch: the same float32 arithmetic per rollout,
 # vmapped in another layout (XLA may block the network products differently).
 BATCH_RTOL = 1e-4
@@ -408,14 +411,17 @@ def test_cross_checks_name_the_pnnl_key(shared_cases, tmp_path):
         from_files(shared_cases / BASE, shared_cases / DYR, path, shared_cases / SIM)
 
 
-def test_pnnl_39_bus_study_file_has_the_papers_settings(shared_cases):
-    """studies/ieee39_pnnl.toml (read in place, with ../shared beside the checkout): the
-    paper's training set (buses 4, 15, 21 × 0/0.05/0.08 s at 1.0 s, base case: 9 tasks), its
-    action range [-0.2, 0], history 10/10/1 by policy kind, and the measured step (2 ms, one
-    sweep)."""
-    from pathlib import Path
+@pytest.fixture(scope="module")
+def pnnl39_file(shared_cases):
+    """studies/ieee39_pnnl.toml (read in place, with ../shared beside the checkout)."""
+    return read_study(REPO / "studies" / "ieee39_pnnl.toml")
 
-    study = read_study(Path(__file__).parent.parent / "studies" / "ieee39_pnnl.toml")
+
+def test_pnnl_39_bus_study_file_has_the_papers_settings(pnnl39_file):
+    """The study file: the paper's training set (buses 4, 15, 21 × 0/0.05/0.08 s at 1.0 s,
+    base case: 9 tasks), its action range [-0.2, 0], history 10/10/1 by policy kind, and the
+    measured step (2 ms, one sweep)."""
+    study = pnnl39_file
     train = study.tasks("train")
     assert sorted({(s.fault_bus, s.fault_duration, s.fault_start) for s in train}) == [
         (b, d, 1.0) for b in (4, 15, 21) for d in (0.0, 0.05, 0.08)]
@@ -423,3 +429,53 @@ def test_pnnl_39_bus_study_file_has_the_papers_settings(shared_cases):
     assert (study.params.action_low, study.params.action_high) == (-0.2, 0.0)
     assert [study.history(k) for k in ("linear", "fnn", "lstm")] == [10, 10, 1]
     assert (study.config.dt, study.point(0).sweeps) == (0.002, 1)
+
+
+# --------------------------------------------------------------------------- #
+# A study's settings at other operating points (--study FILE --raw R ...)
+# --------------------------------------------------------------------------- #
+
+def test_a_study_at_another_raw_file_keeps_its_settings(pnnl39, shared_cases):
+    """at_points: the same buses, reward and steps at one RAW file of the grid, each task set
+    at that point; its compiled point is, leaf for leaf, the one the study built from it."""
+    other = at_points(pnnl39, [shared_cases / POINTS[2]])
+    assert [p.label for p in other.points] == [pnnl39.points[2].label]
+    assert (other.config, other.params) == (pnnl39.config, pnnl39.params)
+    assert 3 * len(other.tasks("train")) == len(pnnl39.tasks("train"))
+    for ours, theirs in zip(jax.tree.leaves(other.point(0)), jax.tree.leaves(pnnl39.point(2))):
+        np.testing.assert_array_equal(ours, theirs)
+
+
+def test_committed_policy_runs_on_the_study_file_at_another_load_level(pnnl39_file,
+                                                                       shared_cases):
+    """`experiments.evaluate --study studies/ieee39_pnnl.toml --raw PERC90.raw --controller
+    policy:results/pnnl39/policy`: the paper's settings (action range, LSTM history 1) at a
+    load level; the generalisation set, which indexed the 12 load levels, and the test set
+    both run at the one point, and the committed policy's layout is this study's."""
+    from experiments.evaluate import controlled_env
+
+    study = at_points(pnnl39_file, [shared_cases / POINTS[1]])
+    assert (study.params.action_low, study.history("lstm")) == (-0.2, 1)
+    assert len(study.tasks("test")) == 120 and len(study.tasks("generalisation")) == 120
+    env, apply, params, carry = controlled_env(study, f"policy:{REPO / 'results/pnnl39/policy'}")
+    action, _ = apply(params, np.ones(env.config.history * env.obs_size, np.float32), carry)
+    assert env.config.history == 1 and action.shape == (len(env.action_slots),)
+    assert np.all((action >= study.params.action_low) & (action <= study.params.action_high))
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--raw", "a.raw", "--dyr", "a.dyr"], r"--study with --raw .* drop --dyr"),
+    (["--study", "ieee39_fidvr", "--load-levels", "0.9", "--raw", "a.raw"],
+     r"--study with --raw .* --load-levels"),
+    (["--study", "ieee39_fidvr", "--raw", "a.raw"], r"built-in 'ieee39_fidvr'.*--load-levels"),
+])
+def test_study_with_raw_files_names_the_flags_it_cannot_take(flags, message):
+    import argparse
+
+    from experiments.studyargs import add_study_arguments, study_from_args
+
+    parser = argparse.ArgumentParser()
+    add_study_arguments(parser, None)
+    args = parser.parse_args(["--study", "x.toml", *flags] if flags[0] == "--raw" else flags)
+    with pytest.raises(ValueError, match=message):
+        study_from_args(args)
