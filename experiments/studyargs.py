@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 
 from jaxgrid import cases
-from jaxgrid.study import Study, at_points, builtin, from_files, load_study
+from jaxgrid.study import Study, builtin, from_files, load_study, read_study
 
 
 def add_study_arguments(parser: argparse.ArgumentParser, default: str | None) -> None:
@@ -36,7 +36,10 @@ def study_from_args(args: argparse.Namespace, fallback: str | None = None) -> St
             raise ValueError("--study with --raw takes the study's settings at the RAW files' "
                              "operating points: drop --dyr, --task-config, --sim-config and "
                              "--load-levels")
-        return at_points(load_study(args.study), args.raw)
+        if args.study in cases.names():
+            raise ValueError(f"--raw with the built-in {args.study!r}: its operating points are "
+                             "load levels (--load-levels), not RAW files")
+        return read_study(args.study, raw=args.raw)
     if args.raw:
         if args.load_levels:
             raise ValueError("--raw builds a study from files: drop --load-levels")

@@ -19,8 +19,7 @@ from baselines.controllers import no_control
 from jaxgrid.env import EnvParams
 from jaxgrid.io.raw import read_raw
 from jaxgrid.rollouts import at_point, rollout_specs, stratified_sampler
-from jaxgrid.study import (CompileSettings, at_points, builtin, from_files, read_study,
-                           write_study)
+from jaxgrid.study import CompileSettings, builtin, from_files, read_study, write_study
 from jaxgrid.tasks import TaskSet, TaskSpec
 
 BASE = "ieee39/IEEE39bus_multiloads_xfmr4_smallX_v30.raw"
@@ -411,17 +410,12 @@ def test_cross_checks_name_the_pnnl_key(shared_cases, tmp_path):
         from_files(shared_cases / BASE, shared_cases / DYR, path, shared_cases / SIM)
 
 
-@pytest.fixture(scope="module")
-def pnnl39_file(shared_cases):
-    """studies/ieee39_pnnl.toml (read in place, with ../shared beside the checkout)."""
-    return read_study(REPO / "studies" / "ieee39_pnnl.toml")
-
-
-def test_pnnl_39_bus_study_file_has_the_papers_settings(pnnl39_file):
-    """The study file: the paper's training set (buses 4, 15, 21 × 0/0.05/0.08 s at 1.0 s,
-    base case: 9 tasks), its action range [-0.2, 0], history 10/10/1 by policy kind, and the
-    measured step (2 ms, one sweep)."""
-    study = pnnl39_file
+def test_pnnl_39_bus_study_file_has_the_papers_settings(shared_cases):
+    """studies/ieee39_pnnl.toml (read in place, with ../shared beside the checkout): the
+    paper's training set (buses 4, 15, 21 × 0/0.05/0.08 s at 1.0 s, base case: 9 tasks), its
+    action range [-0.2, 0], history 10/10/1 by policy kind, and the measured step (2 ms, one
+    sweep)."""
+    study = read_study(REPO / "studies" / "ieee39_pnnl.toml")
     train = study.tasks("train")
     assert sorted({(s.fault_bus, s.fault_duration, s.fault_start) for s in train}) == [
         (b, d, 1.0) for b in (4, 15, 21) for d in (0.0, 0.05, 0.08)]
@@ -435,10 +429,12 @@ def test_pnnl_39_bus_study_file_has_the_papers_settings(pnnl39_file):
 # A study's settings at other operating points (--study FILE --raw R ...)
 # --------------------------------------------------------------------------- #
 
-def test_a_study_at_another_raw_file_keeps_its_settings(pnnl39, shared_cases):
-    """at_points: the same buses, reward and steps at one RAW file of the grid, each task set
-    at that point; its compiled point is, leaf for leaf, the one the study built from it."""
-    other = at_points(pnnl39, [shared_cases / POINTS[2]])
+def test_a_study_at_another_raw_file_keeps_its_settings(pnnl39, shared_cases, tmp_path):
+    """read_study(FILE, raw=...): the same buses, reward and steps at one RAW file of the
+    grid, each task set at that point; its compiled point is, leaf for leaf, the one the
+    study built from it."""
+    write_study(pnnl39, tmp_path / "study.toml")
+    other = read_study(tmp_path / "study.toml", raw=[shared_cases / POINTS[2]])
     assert [p.label for p in other.points] == [pnnl39.points[2].label]
     assert (other.config, other.params) == (pnnl39.config, pnnl39.params)
     assert 3 * len(other.tasks("train")) == len(pnnl39.tasks("train"))
@@ -446,15 +442,14 @@ def test_a_study_at_another_raw_file_keeps_its_settings(pnnl39, shared_cases):
         np.testing.assert_array_equal(ours, theirs)
 
 
-def test_committed_policy_runs_on_the_study_file_at_another_load_level(pnnl39_file,
-                                                                       shared_cases):
+def test_committed_policy_runs_on_the_study_file_at_another_load_level(shared_cases):
     """`experiments.evaluate --study studies/ieee39_pnnl.toml --raw PERC90.raw --controller
     policy:results/pnnl39/policy`: the paper's settings (action range, LSTM history 1) at a
     load level; the generalisation set, which indexed the 12 load levels, and the test set
     both run at the one point, and the committed policy's layout is this study's."""
     from experiments.evaluate import controlled_env
 
-    study = at_points(pnnl39_file, [shared_cases / POINTS[1]])
+    study = read_study(REPO / "studies" / "ieee39_pnnl.toml", raw=[shared_cases / POINTS[1]])
     assert (study.params.action_low, study.history("lstm")) == (-0.2, 1)
     assert len(study.tasks("test")) == 120 and len(study.tasks("generalisation")) == 120
     env, apply, params, carry = controlled_env(study, f"policy:{REPO / 'results/pnnl39/policy'}")

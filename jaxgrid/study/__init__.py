@@ -3,7 +3,7 @@
     study = load_study("ieee39_fidvr")                  # built-in, load levels as points
     study = load_study("studies/ieee39_pnnl.toml")      # the project's study file
     study = from_files(["a.raw", "b.raw"], "x.dyr", "task.json", "sim.json")
-    other = at_points(study, ["c.raw"])                 # the same settings at another point
+    other = read_study("studies/ieee39_pnnl.toml", raw=["c.raw"])  # its settings at c.raw
     env, grid = study.env(), study.point(0)
     write_study(study, "run/study.toml")                # a run folder alone reproduces it
 
@@ -42,12 +42,12 @@ flow, compile, stacking) and `toml` (the study-file codec).
 """
 from __future__ import annotations
 
-from jaxgrid.study.build import at_points, builtin, from_files, rebuild
+from jaxgrid.study.build import builtin, from_files, rebuild
 from jaxgrid.study.definition import (CompileSettings, GridSource, OperatingPoint, Study,
                                       StudyDefinition, StudyWarning, TrainingSettings)
 from jaxgrid.study.names import BusTable, bus_number
 from jaxgrid.study.toml import load_study, read_study, write_study
 
 __all__ = ["BusTable", "CompileSettings", "GridSource", "OperatingPoint", "Study",
-           "StudyDefinition", "StudyWarning", "TrainingSettings", "at_points", "builtin",
-           "bus_number", "from_files", "load_study", "read_study", "rebuild", "write_study"]
+           "StudyDefinition", "StudyWarning", "TrainingSettings", "builtin", "bus_number",
+           "from_files", "load_study", "read_study", "rebuild", "write_study"]

@@ -5,7 +5,6 @@ stacked into one `GridModel` pytree with a leading operating-point axis.
     builtin("ieee39_fidvr", load_levels=(0.9, 1.0))     # a built-in study
     from_files(["a.raw", "b.raw"], "x.dyr", "task.json", "sim.json")
     rebuild(study, precision="float64", sweeps=4)       # the same study compiled otherwise
-    at_points(study, ["c.raw"])                         # its settings at other RAW files
 """
 from __future__ import annotations
 
@@ -49,34 +48,13 @@ def rebuild(study: Study, **compile_changes) -> Study:
     """`study` built again from its definition with CompileSettings fields changed, e.g.
     precision="float64", sweeps=4 (a reference model for accuracy checks)."""
     d = study.definition
-    return _build_definition(dataclasses.replace(
-        d, compile=dataclasses.replace(d.compile, **compile_changes)))
 
-
-def at_points(study: Study, raw) -> Study:
-    """`study`'s settings (buses, reward, steps, history, fault sets) at other operating
-    points of its grid: the RAW files `raw` (one per point) in place of its own, every task
-    set at all of them (a set's `operating_points` indexed the old points). A policy trained
-    on `study` observes and acts on the same buses here (`experiments.evaluate --study FILE
-    --raw R ...`). ValueError for a built-in study (its points are `load_levels`)."""
-    d = study.definition
-    if d.grid.builtin is not None:
-        raise ValueError(f"study {d.name!r} is the built-in {d.grid.builtin!r}: its operating "
-                         "points are load levels (--load-levels), not RAW files")
-    raw = [raw] if isinstance(raw, (str, Path)) else list(raw)
-    grid = dataclasses.replace(d.grid, raw=tuple(str(Path(r).resolve()) for r in raw))
-    tasks = {k: dataclasses.replace(v, operating_points=None) for k, v in d.tasks.items()}
-    return _build_definition(dataclasses.replace(d, grid=grid, tasks=tasks))
-
-
-def _build_definition(d: StudyDefinition) -> Study:
-    """The study of a definition, every field given as an override of its source's."""
     def fields(value) -> dict:
         return {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
 
-    return build(d.grid, name=d.name, compile=d.compile, env=fields(d.env),
-                 params=fields(d.params), tasks={k: fields(v) for k, v in d.tasks.items()},
-                 training=fields(d.training))
+    return build(d.grid, name=d.name, compile=dataclasses.replace(d.compile, **compile_changes),
+                 env=fields(d.env), params=fields(d.params),
+                 tasks={k: fields(v) for k, v in d.tasks.items()}, training=fields(d.training))
 
 
 @contextlib.contextmanager

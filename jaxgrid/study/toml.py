@@ -42,9 +42,12 @@ def load_study(spec: str) -> Study:
 _SECTIONS = {"name", "grid", "compile", "env", "params", "tasks", "training"}
 
 
-def read_study(path: str | Path) -> Study:
+def read_study(path: str | Path, raw=None) -> Study:
     """A study from its TOML file (format: `jaxgrid.study`); errors name the file, key and
-    value."""
+    value. `raw`: RAW files (one per operating point) in place of the file's grid.raw: its
+    settings (buses, reward, steps, history, fault sets) at other operating points of its
+    grid, every task set at all of them (a set's operating_points index the file's points),
+    so a policy trained on the study runs there (`--study FILE --raw R ...`)."""
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text())
@@ -58,7 +61,12 @@ def read_study(path: str | Path) -> Study:
     for key in ("dyr", "task_config", "sim_config"):
         if key in grid:
             grid[key] = str(_path(base, grid[key], path, f"grid.{key}"))
-    if "raw" in grid:
+    if raw is not None:
+        if "builtin" in grid:
+            raise ValueError(f"{path}: grid.builtin = {grid['builtin']!r}: a built-in's operating "
+                             "points are load levels (--load-levels), not RAW files")
+        grid["raw"] = [str(Path(r).resolve()) for r in raw]
+    elif "raw" in grid:
         raws = [grid["raw"]] if isinstance(grid["raw"], str) else grid["raw"]
         grid["raw"] = [str(p) for r in raws for p in _paths(base, r, path)]
     with renamed_errors(lambda key: f"{path}: grid.{key}"):
@@ -68,6 +76,8 @@ def read_study(path: str | Path) -> Study:
     params = _fields(EnvParams, data.get("params", {}), path, "params")
     tasks = {name: _fields(TaskSet, values, path, f"tasks.{name}")
              for name, values in _table(data.get("tasks", {}), path, "tasks").items()}
+    if raw is not None:  # sources leave operating_points unset: only the file's could index
+        tasks = {name: {**values, "operating_points": None} for name, values in tasks.items()}
     training = _fields(TrainingSettings, data.get("training", {}), path, "training")
     name = data.get("name")
     if name is not None and not isinstance(name, str):
