@@ -38,12 +38,19 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--lenient", action="store_true",
                    help="drop unsupported dynamic models (with a warning) instead of failing")
     p.add_argument("--float64", action="store_true", help="run the time loop in float64")
-    p.add_argument("--motor-share", default="psse_load_record",
-                   help="load an ACMTBLU1 motor represents: psse_load_record (default), "
-                        "interpss_bus_total (the original study's simulator) or fraction:X")
+    p.add_argument("--motor-share", default="gridpack",
+                   help="load an ACMTBLU1 motor represents: gridpack (default: CON(36), else "
+                        "0.43 of its load record, as the PARS study's GridPACK), "
+                        "psse_load_record (the whole record), interpss_bus_total or fraction:X")
+    p.add_argument("--motor-heating", default="stalled", choices=["stalled", "gridpack"],
+                   help="which ACMTBLU1 parts heat: stalled (default, PSS/E and WECC) or "
+                        "gridpack (GridPACK as published: running part A too)")
     p.add_argument("--vx-rule", default="reference_running1",
                    choices=["reference_running1", "spec_running2"],
                    help="ACMTBLU1 stall-jump voltage rule (default: the original study's)")
+    p.add_argument("--machine-base", default="gridpack", choices=["gridpack", "raw"],
+                   help="MBASE of a GENSAL/GENROU the power flow loads beyond it: gridpack "
+                        "(default: 1.2 × its loading, as the PARS study's GridPACK) or raw")
     p.add_argument("--out", required=True, help="output .npz")
     return p
 
@@ -54,8 +61,10 @@ def main(argv: list[str] | None = None) -> int:
         case = read_raw(args.raw)
         options = CompileOptions(strict=not args.lenient,
                                  motors=MotorOptions(share_mode=args.motor_share,
-                                                     vx_rule=args.vx_rule),
-                                 precision="float64" if args.float64 else "float32")
+                                                     vx_rule=args.vx_rule,
+                                                     heating=args.motor_heating),
+                                 precision="float64" if args.float64 else "float32",
+                                 machine_base=args.machine_base)
         model = compile_model(case, read_dyr(args.dyr), options)
         for note in model.notes:
             if note.startswith("load report: "):

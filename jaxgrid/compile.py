@@ -64,6 +64,11 @@ _KINDS = {
 }
 
 
+MACHINE_BASE_RULES = ("gridpack", "raw")  # CompileOptions.machine_base
+GRIDPACK_RESIZED = ("GENSAL", "GENROU")  # the machine models GridPACK re-bases when overloaded
+MBASE_MARGIN = 1.2  # GridPACK's new MBASE over the machine's loading
+
+
 class ModelWarning(UserWarning):
     """Dynamic data dropped or approximated: unsupported models and records naming no
     generator (lenient mode), and every model's notes."""
@@ -88,6 +93,8 @@ class CompileOptions:
       composite: readings of the WECC composite load (CMLDBLU1/2) data.
       precision: "float32" (default time loop) or "float64".
       sweeps: fixed-point sweeps per network solution (>= 1).
+      machine_base: "gridpack" (default) or "raw", where the power flow loads a GENSAL or
+        GENROU beyond its MBASE ([choice], `machine_bases`).
       init_tolerance: largest |derivative| at t = 0 accepted without an InitWarning.
     """
 
@@ -99,8 +106,12 @@ class CompileOptions:
     precision: str = "float32"
     sweeps: int = 2
     init_tolerance: float = 1e-5
+    machine_base: str = "gridpack"
 
     def __post_init__(self):
+        if self.machine_base not in MACHINE_BASE_RULES:
+            raise ValueError(f"machine_base = {self.machine_base!r}: allowed "
+                             f"{', '.join(MACHINE_BASE_RULES)}")
         if self.precision not in ("float32", "float64"):
             raise ValueError(f"precision = {self.precision!r}: allowed 'float32' or 'float64'")
         if not isinstance(self.sweeps, int) or self.sweeps < 1:
@@ -134,7 +145,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
 
     gen = case.generators
     sbase = case.base_mva
-    ratio = np.where(gen.mbase[order] > 0, gen.mbase[order], sbase) / sbase
+    ratio = machine_bases(case, pf, machines, order, options.machine_base, notes) / sbase
     vt0 = (pf.vm * np.exp(1j * pf.va))[gen.bus[order]]
     i0 = np.conj((pf.pg[order] + 1j * pf.qg[order]) / ratio / vt0)  # machine base
     bus_p = _bus_load_at(_without_composite(case, pending["loads"]), pf).real
@@ -283,13 +294,28 @@ def _classify(dyr: DyrData, case: Case, strict: bool, notes: list[str]) -> dict[
                            "drops them with the fallbacks listed)")
         warnings.warn(message, ModelWarning, stacklevel=3)
         notes.append(message)
-    for kind, rs in out.items():
-        seen = Counter(_key(r) for r in rs)
-        for r in rs:
-            if seen[_key(r)] > 1:
-                raise ModelError(f"{r.source}:{r.line}: bus {r.bus} id '{r.device_id}' has "
-                                 f"more than one {kind} model")
-    return out
+    return {kind: _without_repeats(rs, kind, notes) for kind, rs in out.items()}
+
+
+def _without_repeats(records: list[DyrRecord], kind: str, notes: list[str]) -> list[DyrRecord]:
+    """`records` with identical repeats of a unit's record read once (noted); ModelError
+    naming both lines where one unit has two different records of `kind`."""
+    first: dict[tuple, DyrRecord] = {}
+    kept = []
+    for r in records:
+        seen = first.setdefault(_key(r), r)
+        if seen is r:
+            kept.append(r)
+        elif (seen.model, seen.cons, seen.icons) == (r.model, r.cons, r.icons):
+            notes.append(f"{r.source}:{r.line}: {device_label(r)} repeats line {seen.line} "
+                         "exactly: read once")
+        else:
+            raise ModelError(f"{r.source}:{r.line}: bus {r.bus} id '{r.device_id}' has a "
+                             f"second {kind} model ({r.model}; the first, {seen.model}, is at "
+                             f"line {seen.line})" if seen.model != r.model else
+                             f"{r.source}:{r.line}: {device_label(r)} repeats line {seen.line} "
+                             "with other values")
+    return kept
 
 
 def _report_model_notes(case: Case, groups, notes: list[str]) -> None:
@@ -351,6 +377,30 @@ class Pending(NamedTuple):
     labels: tuple[str, ...]
     units: tuple[int, ...]
     index: tuple[int, ...]
+
+
+def machine_bases(case: Case, pf: PowerFlowResult, machines: list[Pending], order: np.ndarray,
+                  rule: str, notes: list[str]) -> np.ndarray:
+    """MBASE (MVA) of each machine in `order` (0 in the RAW: the system base).
+
+    [choice] rule "raw": as written (the PSS/E reading). "gridpack" (default): a GENSAL or
+    GENROU that the power flow loads beyond its MBASE gets MBASE = 1.2·|S|, as GridPACK, the
+    simulator of the PARS study, does when it reads these models; its per-unit data (X''d,
+    H, the governor's limits) then act on that base. Each change is noted.
+    """
+    gen = case.generators
+    mbase = np.where(gen.mbase[order] > 0, gen.mbase[order], case.base_mva)
+    if rule == "raw":
+        return mbase
+    loading = np.abs(pf.pg[order] + 1j * pf.qg[order]) * case.base_mva
+    names = [g.model.name for g in machines for _ in g.units]
+    labels = [label for g in machines for label in g.labels]
+    raised = np.isin(names, GRIDPACK_RESIZED) & (loading > mbase)
+    for k in np.flatnonzero(raised):
+        notes.append(f"{labels[k]}: loaded {loading[k]:.1f} MVA by the power flow, beyond MBASE = "
+                     f"{mbase[k]:g} MVA: MBASE taken as {MBASE_MARGIN:g} × {loading[k]:.1f} MVA "
+                     "(GridPACK's rule; CompileOptions(machine_base='raw') keeps the RAW's)")
+    return np.where(raised, MBASE_MARGIN * loading, mbase)
 
 
 def _machine_groups(case, records, keys, strict, notes) -> list[Pending]:
@@ -588,7 +638,7 @@ def _check_initial_state(model: GridModel, tolerance: float, notes: list[str]) -
                                         f"{float(x[name][u]):.4g} is outside its limits")
         stepped = update_loads(model, x0.replace(v=v), x0.v, 1e-3)
         for g, before, after in zip(model.loads, x0.load_flags, stepped.load_flags):
-            for name in before:
+            for name in set(before) - set(g.model.relaxing):
                 change = np.abs(np.asarray(after[name]) - np.asarray(before[name]))
                 for u in np.flatnonzero(change > tolerance):
                     problems.append(f"{g.labels[u]}: {name} moves by {change[u]:.3g} in the "

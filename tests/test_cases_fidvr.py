@@ -85,7 +85,9 @@ def test_builds_with_records_for_every_unit_and_motor(study):
     assert tuple(r.bus for r in motors) == study.motor_buses
     for r in motors:
         assert r.record_type == "USRLOD" and r.header == ACMTBLU1_HEADER
-        assert len(r.cons) == len(Acmtblu1.cons), f"{r.source}:{r.line}: CON count"
+        # the 35 CONs and GridPACK's CON(36), the motor's share of its record: all of it
+        assert len(r.cons) == len(Acmtblu1.cons) + 1, f"{r.source}:{r.line}: CON count"
+        assert r.cons[-1] == 1.0, f"{r.source}:{r.line}: the motor takes its whole record"
 
 
 def test_power_flow_converges(study):

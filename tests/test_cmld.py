@@ -170,6 +170,8 @@ def test_initialised_at_rest_and_drawing_the_power_flow_load(system):
     assert float(residual) < NET_TOL, "the network sweep moves at the power-flow point"
     stepped = update_loads(system, x0.replace(v=v), x0.v, DT)
     for name, value in stepped.load_flags[0].items():
+        if name in system.loads[0].model.relaxing:  # motor D's windings cool while running
+            continue
         change = np.abs(np.asarray(value) - np.asarray(x0.load_flags[0][name])).max()
         assert change < 1e-12, f"{name} moves by {change:.2e} in the first step at rest"
     _, current, _, _ = solve_network(system, x0, fault, 0.0)
@@ -285,7 +287,7 @@ def test_motor_d_is_acmtblu1(tmp_path):
     pd = Acmtblu1.read(read_dyr(tmp_path / "d.dyr").records)
     pd, _, out, zd, _ = Acmtblu1.init(pd, LoadSite(
         v0=np.array([v_l]), record_s=np.array([p_l]), bus_p=np.array([p_l]), sbase=SBASE,
-        f_nom=F_NOM, motors=MotorOptions()))
+        f_nom=F_NOM, motors=MotorOptions(share_mode="psse_load_record")))
     sd = out["s0"]
     assert init.s0[0] == pytest.approx(sd[0], abs=1e-12), "the unit is motor D alone"
     # stall below Vstall 0.45, contactors 0.5/0.4, restart of part B above Vrst 0.95

@@ -22,10 +22,11 @@ import pytest
 from conftest import SHARED_CASES, andes_cases_dir
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.models.base import ModelError
-from jaxgrid.models.governors import (GOVERNORS, Gast, GovernorPorts, GovernorStart, Hygov,
-                                      Ieeeg1, Ieesgo, Tgov1)
+from jaxgrid.models.governors import (GOVERNORS, WIDEN_MARGIN, Gast, GovernorPorts,
+                                      GovernorStart, Hygov, Ieeeg1, Ieesgo, Tgov1, Wsieg1)
 
 IEEE39_DYR = SHARED_CASES / "ieee39" / "IEEE39bus_3AC.dyr"
+GRIDPACK_DYR = SHARED_CASES / "ieee39" / "IEEE39bus_3AC_exdc1_gridpack.dyr"  # WSIEG1
 ACTIVSG_DYR = SHARED_CASES / "activsg2000" / "ACTIVSg2000_dyn_acmotor_zone3_v1.dyr"
 
 STEADY_TOL = 1e-9   # float64 residual of an exact steady state (values of order 1)
@@ -46,7 +47,8 @@ def records(tmp_path_factory) -> dict[str, dict[str, tuple]]:
     kundur_path = tmp_path_factory.mktemp("kundur") / "kundur_full.dyr"
     kundur_path.write_text("\n".join(kundur) + "\n")
     out = {}
-    for source, path in (("ieee39", IEEE39_DYR), ("activsg", ACTIVSG_DYR), ("kundur", kundur_path)):
+    for source, path in (("ieee39", IEEE39_DYR), ("activsg", ACTIVSG_DYR), ("kundur", kundur_path),
+                         ("gridpack39", GRIDPACK_DYR)):
         data = read_dyr(path, supported=None)
         out[source] = {name: data.by_model(name) for name in GOVERNORS}
     return out
@@ -88,7 +90,8 @@ def simulate(model, p, x, dw, t_end: float, dt: float):
 # --------------------------------------------------------------------------- #
 
 STEADY_CASES = [("TGOV1", "ieee39"), ("IEEEG1", "ieee39"), ("GAST", "ieee39"),
-                ("IEESGO", "ieee39"), ("HYGOV", "activsg"), ("TGOV1", "kundur")]
+                ("IEESGO", "ieee39"), ("HYGOV", "activsg"), ("TGOV1", "kundur"),
+                ("WSIEG1", "gridpack39")]
 
 
 @pytest.mark.parametrize("bypass", [False, True], ids=["as-read", "half-bypassed"])
@@ -112,7 +115,7 @@ def test_init_is_steady(records, name, source, bypass):
     assert float(jnp.max(jnp.abs(pm - pm0))) < STEADY_TOL, f"{name} ({source}): Pm {pm} != {pm0}"
 
 
-@pytest.mark.parametrize("name,source", STEADY_CASES[:5])
+@pytest.mark.parametrize("name,source", STEADY_CASES[:5] + STEADY_CASES[6:])
 def test_dynamics_jit_and_gradient(records, name, source):
     model = GOVERNORS[name]
     p = with_bypassed_half(model, params(model, records[source][name]))
@@ -314,8 +317,43 @@ def test_ieeeg1_second_machine_is_rejected(tmp_path):
 
 @pytest.mark.parametrize("model", list(GOVERNORS.values()), ids=list(GOVERNORS))
 def test_con_tables_are_complete(model):
-    counts = {"TGOV1": 7, "IEEEG1": 20, "GAST": 9, "IEESGO": 11, "HYGOV": 12}
+    counts = {"TGOV1": 7, "IEEEG1": 20, "WSIEG1": 34, "GAST": 9, "IEESGO": 11, "HYGOV": 12}
     names = [c.name for c in model.cons]
     assert len(names) == counts[model.name] and len(set(names)) == len(names), names
     assert all(c.unit and c.info for c in model.cons), model.name
     assert model.states, model.name
+
+
+def test_wsieg1_droop_settles(records):
+    """PNNL GridPACK 39-bus WSIEG1 (K = 25, T1 = T2 = 0, T3 = 0.1, T4 = 0.3, K1 = 1): a
+    speed 0.2 % low opens the valve by K·0.002 p.u., reached as Pm after the T4 lag."""
+    p = params(Wsieg1, records["gridpack39"]["WSIEG1"][:1])
+    p, x, *_ = Wsieg1.init(p, GovernorStart(jnp.array([0.6])))
+    x = simulate(Wsieg1, p, x, -0.002, 10.0, 1e-3)
+    pm, _ = Wsieg1.rates(p, x, GovernorPorts(jnp.full(1, -0.002)))
+    assert float(pm[0]) == pytest.approx(0.6 + 25.0 * 0.002, abs=SETTLED_TOL)
+
+
+def test_wsieg1_limits_widen_at_init_as_gridpack(records):
+    """A valve that starts above PMAX (1.01, unit 31 of the PNNL data at its RAW MBASE) moves
+    PMAX and Uo to the start plus 0.1 p.u., noted; IBLOCK 3 sets zero limits to the start."""
+    p = params(Wsieg1, records["gridpack39"]["WSIEG1"][:2], iblock=np.array([0.0, 3.0]),
+               pmin=np.array([0.0, 0.0]), pmax=np.array([1.01, 0.0]))
+    p, x, *_ = Wsieg1.init(p, GovernorStart(jnp.array([1.121, 0.6])))
+    assert float(p["pmax"][0]) == pytest.approx(1.121 + WIDEN_MARGIN)
+    assert float(p["uo"][0]) == pytest.approx(1.121 + WIDEN_MARGIN)
+    assert (float(p["pmin"][1]), float(p["pmax"][1])) == pytest.approx((0.6, 0.6))
+    assert not any(np.any(v) for v in Wsieg1.init_violations(p, x).values())
+    notes = Wsieg1.notes(p, ("unit 31", "unit 32"))
+    assert any(n.startswith("unit 31: initial valve 1.121 is outside PMAX = 1.01: PMAX set to "
+                            "1.221") for n in notes), notes
+
+
+def test_wsieg1_unmodelled_deadband_is_rejected(tmp_path):
+    record = next(line for line in GRIDPACK_DYR.read_text(encoding="utf-8-sig").splitlines()
+                  if "'WSIEG1'" in line)
+    values = record.split(",")
+    values[25] = " 0.0005"  # DB1, the 21st CON after two ICONs
+    message = read_error(Wsieg1, tmp_path, ",".join(values) + "\n")
+    assert re.search(r":1: WSIEG1 at bus 30 .*DB1 != 0: WSIEG1 deadbands and valve-gain table "
+                     r"are not modelled", message), message

@@ -163,7 +163,10 @@ MBASE_STEP, MBASE_MIN = 10.0, 20.0  # MVA
 NO_Q_LIMIT = 99.99  # p.u. system base (9999 Mvar), as "no limit" in PSS/E files
 
 # ACMTBLU1 USRLOD header and the two cases' CONs (names as in shared/specs/acmtblu1.md §2).
-ACMTBLU1_HEADER = (12, 1, 0, 35, 9, 29, 16)  # IC, IT, NI, NC, NS, NV, NX
+# NC = 36: the 36th CON (GridPACK's extension) is the motor's share of its load record, 1.0:
+# the whole record, as these cases were built (`jaxgrid.models.acmotor`, share_mode).
+ACMTBLU1_HEADER = (12, 1, 0, 36, 9, 29, 16)  # IC, IT, NI, NC, NS, NV, NX
+WHOLE_RECORD = 1.0
 ACMTBLU1_39 = dict(
     tstall=0.033, trst=0.40, tv=0.02, tf=0.05, complf=0.0, comppf=0.98, vstall=0.5, rstall=0.124,
     xstall=0.114, lfadj=0.3, kp1=0.0, np1=1.0, kq1=6.0, nq1=2.0, kp2=12.0, np2=3.2, kq2=11.0,
@@ -228,7 +231,8 @@ def ieee39_fidvr(load_level: float = 1.0) -> StudyCase:
         records.append(("IEEET1", bus, gen_id, _cons(Ieeet1, IEEET1_TYPICAL)))
         governor = (Hygov, HYGOV_TYPICAL) if bus in HYDRO_39 else (Tgov1, TGOV1_TYPICAL)
         records.append((governor[0].name, bus, gen_id, _cons(*governor)))
-    records += [("ACMTBLU1", bus, MOTOR_LOAD_ID, _cons(Acmtblu1, ACMTBLU1_39))
+    records += [("ACMTBLU1", bus, MOTOR_LOAD_ID,
+                 _cons(Acmtblu1, ACMTBLU1_39) + (WHOLE_RECORD,))
                 for bus in MOTOR_BUSES_39]
     return StudyCase(
         name=case.name, case=case, dyr=_dyr("ieee39_fidvr", records),
@@ -257,7 +261,8 @@ def ieee300_fidvr(load_level: float = 1.0) -> StudyCase:
         records.append(("IEEET1", bus, gen_id, _cons(Ieeet1, IEEET1_TYPICAL)))
         if not condenser[k]:
             records.append(("TGOV1", bus, gen_id, _cons(Tgov1, TGOV1_TYPICAL)))
-    records += [("ACMTBLU1", bus, MOTOR_LOAD_ID, _cons(Acmtblu1, ACMTBLU1_300))
+    records += [("ACMTBLU1", bus, MOTOR_LOAD_ID,
+                 _cons(Acmtblu1, ACMTBLU1_300) + (WHOLE_RECORD,))
                 for bus in motor_buses]
     return StudyCase(
         name=case.name, case=case, dyr=_dyr("ieee300_fidvr", records),

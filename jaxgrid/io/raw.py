@@ -514,6 +514,12 @@ def parse_raw(text: str, source: str = "<raw>", *, version: int | None = None,
     return parser.case(name or Path(source).stem)
 
 
+def raw_version(path: str | Path) -> int:
+    """The RAW version (23, 30-33) of a file, from its case identification record."""
+    path = Path(path)
+    return _RawParser(path.read_text(encoding="utf-8", errors="replace"), str(path), None).version
+
+
 def read_raw(path: str | Path, *, version: int | None = None) -> Case:
     """Read a PSS/E RAW file (v23, v30-v33) into a validated `Case`."""
     path = Path(path)

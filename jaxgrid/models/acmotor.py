@@ -13,10 +13,19 @@ f = 1 + Δθ/(ω0·dt) between accepted steps, held while |V| < 0.1 p.u. (the an
 collapsed voltage is meaningless); switching instants give short spikes, as in PSS/E.
 
 Switches where the reference simulators disagree (`MotorOptions`, each [choice] of the spec):
-  share_mode: how much load a motor represents (§3): "psse_load_record" (default, the
-    RAW load record the model is attached to), "interpss_bus_total" (CompLF × the bus's
-    total load, what the original study's simulator InterPSS did), "fraction:x" (x of the
-    load record; GridPACK uses 0.43).
+  share_mode: how much load a motor represents (§3): "gridpack" (default: the fraction of
+    the RAW load record given by a 36th CON, GridPACK's extension, else 0.43, as GridPACK,
+    the simulator of the PARS study, reads these records; docs/models.md measures it),
+    "psse_load_record" (the whole load record the model is attached to),
+    "interpss_bus_total" (CompLF × the bus's total load, what the RLGC-era simulator
+    InterPSS did), "fraction:x" (x of the load record).
+  heating: which parts heat their windings (§6.1): "stalled" (default, the PSS/E and WECC
+    description: a stalled part heats with I = V·|Ys|, a running part adds no heat and
+    cools from its initial temperature I0²·Rstall) or "gridpack" (GridPACK as published: a
+    running part A heats with the running power of the previous step over the present
+    voltage, which next to a bolted fault (V → 0) heats it by orders of magnitude in one
+    step, and a running part B adds no heat). Either way the thermal trip ramp acts only
+    on a stalled part, as in both references.
   vx_rule: the stall-jump voltage Vx (§4): "reference_running1" (default: the running-1
     curve crossing the stalled power, as InterPSS and GridPACK, which reproduces the
     original study) or "spec_running2" (the WECC text's running-2 crossing).
@@ -24,6 +33,11 @@ Switches where the reference simulators disagree (`MotorOptions`, each [choice] 
     power at V0) or "1pu" (offsets referred to V = 1, as transcribed from the WECC text).
   restall_b: False (default; the references: one stall timer, parts A and B stall
     together and a restarted B never stalls again) or True (per-part timers).
+  contactor: "memory" (default, §6.4: the deepest dip decides the open share, which
+    recloses linearly between Vc2on and Vc1on) or "gridpack" (GridPACK's code: inside the
+    drop-out band the open share follows the present measured voltage, so contactors also
+    reclose along the drop-out line while the voltage rises through it, and fully once it
+    leaves the band above Vc1off).
 Other choices: timers fire at ≥ T − 0.01·dt, not § 6.7's T − 1e-9 s, which float32
 round-off of the summed steps defeats (`base.timer_fires`); CompPF = 0 is rejected (a power factor is needed); Vx is floored at
 `VX_FLOOR` p.u. so a running motor's current stays bounded; the current is computed as
@@ -38,16 +52,19 @@ UV trips, contactors and thermal tripping keep their exact (zero) gradient.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid import vecmath
-from jaxgrid.models.base import (Array, Con, Initial, LoadModel, LoadSite, Params, States,
-                                 surrogate_gradient, timer_fires)
+from jaxgrid.models.base import (Array, Con, Initial, LoadModel, LoadSite, ModelError, Params,
+                                 States, device_label, surrogate_gradient, timer_fires)
 from jaxgrid.models.options import MotorOptions
 
 VX_FLOOR = 0.3  # p.u.: lowest stall-jump voltage (spec §7 guard)
+GRIDPACK_SHARE = 0.43  # GridPACK's A/C motor fraction of its load record when no CON(36)
 VX_SCAN_FROM = 0.4  # p.u.: where the Vx search starts (spec §4)
 V_ANGLE_MIN = 0.1  # p.u.: below it the bus frequency measurement holds
 NO_DIP = 10.0  # p.u.: contactor memory "no dip seen" (a finite +inf)
@@ -107,6 +124,23 @@ class Acmtblu1(LoadModel):
     states = ()
     flags = ("vm", "fm", "theta_a", "theta_b", "run_a", "run_b", "ts_a", "ts_b", "tr_b",
              "tu1", "tu2", "kuv", "vc_min", "kcon", "fth_a", "fth_b")
+    # the winding temperatures start at I0²·Rstall (as GridPACK's) and, with heating
+    # "stalled", cool while the motor runs: not a rest value
+    relaxing = ("theta_a", "theta_b")
+
+    @classmethod
+    def read(cls, records):
+        """CON arrays (module docstring), with "record_share": GridPACK's optional 36th CON,
+        the motor's fraction of its load record (0, or a record of 35 CONs: not given)."""
+        n = len(cls.cons)
+        extra = [r.cons[n] if len(r.cons) == n + 1 else 0.0 for r in records]
+        for r, share in zip(records, extra):
+            if not 0.0 <= share <= 1.0:
+                raise ModelError(f"{device_label(r)}: CON(36) (GridPACK's A/C motor share of the "
+                                 f"load record) = {share:g}: allowed [0, 1] (0: GridPACK's default)")
+        p = super().read([dataclasses.replace(r, cons=r.cons[:n]) if len(r.cons) == n + 1
+                          else r for r in records])
+        return dict(p, record_share=np.asarray(extra))
 
     @classmethod
     def check_combination(cls, p: dict[str, float]) -> str | None:
@@ -130,7 +164,7 @@ class Acmtblu1(LoadModel):
         vstall, vbrk = p["vstall"] * adjust, p["vbrk"] * adjust
         z2 = p["rstall"] ** 2 + p["xstall"] ** 2
         gs, bs = p["rstall"] / z2, p["xstall"] / z2
-        motor_p = _motor_share(site, lf, options)
+        motor_p = _motor_share(site, dict(p, complf=lf), options)
         sm = motor_p / lf  # motor base / system base
         v0 = np.abs(site.v0)
         q_init = lf * np.tan(np.arccos(p["comppf"]))
@@ -138,6 +172,8 @@ class Acmtblu1(LoadModel):
         p.update(complf=lf, vstall_adj=vstall, vbrk_adj=vbrk, gs=gs, bs=bs, sm=sm,
                  omega0=np.full_like(v0, 2 * np.pi * site.f_nom),
                  restall=np.full_like(v0, float(options.restall_b)),
+                 contactor_gridpack=np.full_like(v0, float(options.contactor == "gridpack")),
+                 heat_gridpack=np.full_like(v0, float(options.heating == "gridpack")),
                  stall_surrogate_v=np.zeros_like(v0), stall_surrogate_t=np.zeros_like(v0),
                  thermal_on=((p["th1t"] > 0) & (p["th2t"] > p["th1t"])).astype(float))
         p0 = lf - _running_curve(p, v_ref, "p", 0.0 * v0)
@@ -180,10 +216,7 @@ class Acmtblu1(LoadModel):
     @classmethod
     def current(cls, p: Params, x: States, z: States, v: Array) -> Array:
         vmag = jnp.abs(v)
-        dfm = z["fm"] - 1.0
-        s = ((1.0 - p["frst"]) * z["fth_a"] * _power(p, vmag, z["run_a"], dfm, jnp)
-             + p["frst"] * z["fth_b"] * _power(p, vmag, z["run_b"], dfm, jnp))
-        s = p["sm"] * z["kuv"] * z["kcon"] * s
+        s = p["sm"] * motor_power(p, z, vmag)
         return jnp.conj(s) * v / jnp.maximum(vmag ** 2, 1e-12)
 
     @classmethod
@@ -195,17 +228,19 @@ class Acmtblu1(LoadModel):
         vm = _lag_step(z["vm"], vmag, p["tv"], dt)
         fm = _lag_step(z["fm"], f, p["tf"], dt)
         dfm = fm - 1.0
-        theta = {part: _lag_step(z[f"theta_{part}"], _heat(p, vmag, z[f"run_{part}"], dfm),
-                                 p["tth"], dt) for part in "ab"}
+        heat = {part: _heating(p, part, vmag, jnp.abs(v_old), z[f"run_{part}"], z["fm"] - 1.0)
+                for part in "ab"}
+        theta = {part: _lag_step(z[f"theta_{part}"], heat[part], p["tth"], dt) for part in "ab"}
         run_a, run_b, ts_a, ts_b, tr_b = _stall_and_restart(p, z, vmag, dt)
-        vc_min, kcon = _contactor(p, z["vc_min"], vm)
+        stalled = {"a": run_a < 0.5, "b": run_b < 0.5}
+        vc_min, kcon = _contactor(p, z["vc_min"], z["kcon"], vm)
         tu1 = jnp.where((p["fuvr"] > 0) & (vm < p["uvtr1"]), z["tu1"] + dt, 0.0)
         tu2 = jnp.where((p["fuvr"] > 0) & (vm < p["uvtr2"]), z["tu2"] + dt, 0.0)
         uv_trip = timer_fires(tu1, p["ttr1"], dt) | timer_fires(tu2, p["ttr2"], dt)
         kuv = jnp.where(uv_trip & (p["fuvr"] > 0), jnp.minimum(z["kuv"], 1.0 - p["fuvr"]),
                         z["kuv"])
         span = jnp.where(p["thermal_on"] > 0, p["th2t"] - p["th1t"], 1.0)
-        fth = {part: jnp.where(p["thermal_on"] > 0, jnp.minimum(
+        fth = {part: jnp.where((p["thermal_on"] > 0) & stalled[part], jnp.minimum(
             z[f"fth_{part}"], jnp.clip((p["th2t"] - theta[part]) / span, 0.0, 1.0)),
             z[f"fth_{part}"]) for part in "ab"}
         return dict(vm=vm, fm=fm, theta_a=theta["a"], theta_b=theta["b"], run_a=run_a,
@@ -243,10 +278,33 @@ def _power(p, vmag, running, dfm, xp):
     return s + share * (s_run - s_stall)
 
 
+def motor_power(p, z, vmag, xp=jnp):
+    """Complex power (p.u. on the motor base Sm) the motor draws at |V| = vmag (n,) with
+    flags z: each part's power (§5) weighted by its share and thermal fraction, times the UV
+    relay and contactor fractions (§7 without shedding); xp = numpy on sampled flags."""
+    dfm = z["fm"] - 1.0
+    s = ((1.0 - p["frst"]) * z["fth_a"] * _power(p, vmag, z["run_a"], dfm, xp)
+         + p["frst"] * z["fth_b"] * _power(p, vmag, z["run_b"], dfm, xp))
+    return z["kuv"] * z["kcon"] * s
+
+
 def _heat(p, vmag, running, dfm, xp=jnp):
-    """I²·Rstall of one motor of a part (spec §6.1), motor p.u."""
+    """I²·Rstall of one motor of a part drawing its power at |V| = vmag, motor p.u."""
     s = _power(p, vmag, running, dfm, xp)
     return (xp.abs(s) / xp.maximum(vmag, 1e-6)) ** 2 * p["rstall"]
+
+
+def _heating(p, part: str, vmag, vmag_old, running, dfm_old):
+    """The heat input I²·Rstall (motor p.u.) of one motor of part "a" or "b" over a step to
+    |V| = vmag (module docstring, `heating`): V·|Ys| when stalled; when running, none, or
+    with heating "gridpack" part A's power at the previous step's |V| = vmag_old over vmag."""
+    stalled = vmag ** 2 * (p["gs"] ** 2 + p["bs"] ** 2) * p["rstall"]
+    running_heat = 0.0
+    if part == "a":
+        s_old = _power(p, vmag_old, running, dfm_old, jnp)
+        running_heat = p["heat_gridpack"] * (jnp.abs(s_old) / jnp.maximum(vmag, 1e-6)) ** 2 \
+            * p["rstall"]
+    return jnp.where(running > 0.5, running_heat, stalled)
 
 
 def _lag_step(x, u, t, dt: float):
@@ -283,30 +341,46 @@ def _stall_and_restart(p, z, vmag, dt: float):
     return run_a, run_b, ts_a, ts_b, jnp.where(restart, 0.0, tr_b)
 
 
-def _contactor(p, vc_min, vm):
-    """(memory of the deepest dip, connected share Kcon) after a step (spec §6.4)."""
+def _contactor(p, vc_min, kcon, vm):
+    """(dip memory, connected share Kcon) after a step (spec §6.4; module docstring,
+    `contactor`). The memory is the deepest measured voltage of the dip ("memory") or the
+    last one inside the drop-out band ("gridpack")."""
     on = p["vc1off"] > 0
     off_span = jnp.where(on, p["vc1off"] - p["vc2off"], 1.0)
     on_span = jnp.where(on, p["vc1on"] - p["vc2on"], 1.0)
-    vc_min = jnp.minimum(vc_min, vm)
-    f_open = jnp.clip((p["vc1off"] - vc_min) / off_span, 0.0, 1.0)
     x_rec = jnp.clip((vm - p["vc2on"]) / on_span, 0.0, 1.0)
-    kcon = jnp.where(vm > vc_min, 1.0 - f_open * (1.0 - x_rec), 1.0 - f_open)
+    # "memory": open what the deepest dip opened, reclose only above Vc2on
+    deepest = jnp.minimum(vc_min, vm)
+    f_open = jnp.clip((p["vc1off"] - deepest) / off_span, 0.0, 1.0)
+    memory = jnp.where(vm > deepest, 1.0 - f_open * (1.0 - x_rec), 1.0 - f_open)
     back = (vm >= p["vc1on"]) | ~on
-    return jnp.where(back, NO_DIP, vc_min), jnp.where(back, 1.0, kcon)
+    memory_state = (jnp.where(back, NO_DIP, deepest), jnp.where(back, 1.0, memory))
+    # "gridpack": the drop-out line follows Vm inside its band, the reclose line above Vc2on
+    in_band = vm < p["vc1off"]
+    last = jnp.where(in_band, vm, vc_min)
+    f_trip = jnp.clip((p["vc1off"] - last) / off_span, 0.0, 1.0)
+    literal = jnp.where(in_band, 1.0 - f_trip, jnp.where(
+        vm >= p["vc1on"], 1.0, jnp.where(vm >= p["vc2on"], 1.0 - f_trip * (1.0 - x_rec), kcon)))
+    literal_state = (last, jnp.where(on, literal, 1.0))
+    gridpack = p["contactor_gridpack"] > 0
+    return tuple(jnp.where(gridpack, a, b) for a, b in zip(literal_state, memory_state))
 
 
 # --------------------------------------------------------------------------- #
 # Host-side helpers
 # --------------------------------------------------------------------------- #
 
-def _motor_share(site: LoadSite, lf, options: MotorOptions):
+def _motor_share(site: LoadSite, p, options: MotorOptions):
     """Initial motor active power (p.u. system base) per share_mode (spec §3)."""
+    record_p = np.asarray(site.record_p, dtype=float)
     if options.share_mode == "interpss_bus_total":
-        return lf * site.bus_p
+        return p["complf"] * site.bus_p
     if options.share_mode == "psse_load_record":
-        return np.asarray(site.record_p, dtype=float)
-    return options.share_fraction * np.asarray(site.record_p, dtype=float)
+        return record_p
+    if options.share_mode == "gridpack":
+        given = p.get("record_share", np.zeros_like(record_p))
+        return np.where(given > 0, given, GRIDPACK_SHARE) * record_p
+    return options.share_fraction * record_p
 
 
 def _first_crossing(curve, gs, lo, hi):

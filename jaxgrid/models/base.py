@@ -385,6 +385,7 @@ class LoadModel(DeviceModel):
     """
 
     flags: ClassVar[tuple[str, ...]] = ()
+    relaxing: ClassVar[tuple[str, ...]] = ()  # flags that relax from their start by design
 
     @classmethod
     def ports(cls, signals: Signals, k: Array, flags: States) -> LoadPorts:

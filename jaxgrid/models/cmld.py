@@ -116,6 +116,7 @@ class Cmldblu2(LoadModel):
     states = tuple(f"m{x}_{s}" for x in MOTORS for s in Cim5bl.states)
     flags = (tuple(f"d_{f}" for f in Acmtblu1.flags) + ("vmin_e",)
              + tuple(f"{f}{k}{x}" for x in MOTORS for k in "12" for f in ("on", "ttr", "trc")))
+    relaxing = tuple(f"d_{f}" for f in Acmtblu1.relaxing)  # motor D's winding temperatures
     n_record_icons = 2  # ICONs written before the CONs (rec.icons)
 
     @classmethod

@@ -1,4 +1,4 @@
-"""Turbine-governors: TGOV1, IEEEG1, GAST, IEESGO, HYGOV.
+"""Turbine-governors: TGOV1, IEEEG1, WSIEG1, GAST, IEESGO, HYGOV.
 
 CON orders, equations and initialisation follow `shared/specs/machines-exciters-governors.md`
 §9-§13 (PSS/E model library conventions). Every quantity is per unit on the machine base
@@ -28,6 +28,11 @@ G_OPEN_MIN = 1e-3
 
 # |ΣK − 1| above which IEEEG1 power fractions are reported as not summing to one.
 K_SUM_TOL = 1e-6
+
+# WSIEG1: the limits an initial valve position may violate, with the side it lies beyond
+# (+1 above a maximum, -1 below a minimum), and the margin GridPACK moves them past it, p.u.
+WIDENED = (("pmax", 1), ("pmin", -1), ("uo", 1), ("uc", -1))
+WIDEN_MARGIN = 0.1
 
 
 def _t(name: str, info: str, positive: bool = False) -> Con:
@@ -218,6 +223,70 @@ class Ieeeg1(GovernorModel):
         return {"pgv": (p["pmin"], p["pmax"])}
 
 
+class Wsieg1(Ieeeg1):
+    """WECC/Siemens steam governor WSIEG1: IEEEG1 (spec §10) with deadbands, a valve-gain
+    table and IBLOCK, one machine (JBUS = 0).
+
+    The two deadbands (DB1 with hysteresis ERR on the speed, DB2 on the valve) and the
+    nonlinear valve gain (GV1-PGV5) are not modelled: a record that uses them is rejected
+    (GridPACK, the only open implementation, does not apply them either). IBLOCK 1-3 sets
+    PMIN and/or PMAX to the initial valve position where they are 0 (the PSS/E rule).
+
+    A valve position that starts outside [PMIN, PMAX] moves that limit to the initial
+    position plus a 0.1 p.u. margin, and a valve rate limit it exceeds likewise, as
+    GridPACK's WSIEG1 does at initialisation ("limits modified for the initial state"); the
+    compile report lists each such change.
+    """
+
+    name = "WSIEG1"
+    cons = Ieeeg1.cons + (
+        _pu("db1", "intentional speed deadband DB1 (not modelled: 0)"),
+        _pu("err", "DB1 hysteresis ERR (not modelled: 0)"),
+        _pu("db2", "unintentional valve deadband DB2 (not modelled: 0)"),
+        *(_pu(f"{axis}{k}", f"valve gain table {axis.upper()}{k} (not modelled: 0)")
+          for k in range(1, 6) for axis in ("gv", "pgv")),
+        Con("iblock", "-", "IBLOCK: 1 PMIN, 2 PMAX, 3 both := initial valve where 0",
+            0.0, 3.0))
+
+    @classmethod
+    def check_combination(cls, p):
+        unmodelled = [n.upper() for n in ("db1", "err", "db2") + tuple(
+            f"{axis}{k}" for k in range(1, 6) for axis in ("gv", "pgv")) if p[n] != 0]
+        if unmodelled:
+            return (f"{', '.join(unmodelled)} != 0: WSIEG1 deadbands and valve-gain table "
+                    "are not modelled (set them to 0)")
+        if p["iblock"] != round(p["iblock"]):
+            return f"IBLOCK = {p['iblock']:g}: allowed 0, 1, 2, 3"
+        return super().check_combination(p)
+
+    @classmethod
+    def init(cls, p, start):
+        initial = super().init(p, start)
+        p, pgv0 = dict(initial.params), np.asarray(initial.states["pgv"])
+        block = np.asarray(p["iblock"])
+        p["pmin"] = np.where(((block == 1) | (block == 3)) & (p["pmin"] == 0), pgv0, p["pmin"])
+        p["pmax"] = np.where(((block == 2) | (block == 3)) & (p["pmax"] == 0), pgv0, p["pmax"])
+        p["data_limits"] = np.stack([np.asarray(p[name]) for name, _ in WIDENED])
+        for name, sign in WIDENED:
+            outside = sign * (pgv0 - p[name]) > 0
+            p[name] = np.where(outside, pgv0 + sign * WIDEN_MARGIN, p[name])
+        return initial._replace(params=p)
+
+    @classmethod
+    def notes(cls, p, labels=()):
+        out = super().notes(p, labels)
+        if "data_limits" not in p:  # CONs as read, before init
+            return out
+        for (name, _), before in zip(WIDENED, np.asarray(p["data_limits"])):
+            after = np.asarray(p[name])
+            for k in np.flatnonzero(after != before):
+                label = labels[k] if labels else f"WSIEG1 unit {k}"
+                out.append(f"{label}: initial valve {float(np.asarray(p['p0'])[k]):.4g} is outside "
+                           f"{name.upper()} = {before[k]:g}: {name.upper()} set to {after[k]:.4g} "
+                           f"(GridPACK's rule, margin {WIDEN_MARGIN:g})")
+        return out
+
+
 class Gast(_ValveLimited):
     """Gas turbine GAST (spec §11): droop, load (exhaust temperature) limit, two lags."""
 
@@ -381,4 +450,4 @@ class Hygov(GovernorModel):
         return {"g": outside_limits(x["g"], p["gmin"], p["gmax"])}
 
 
-GOVERNORS = {m.name: m for m in (Tgov1, Ieeeg1, Gast, Ieesgo, Hygov)}
+GOVERNORS = {m.name: m for m in (Tgov1, Ieeeg1, Wsieg1, Gast, Ieesgo, Hygov)}

@@ -7,7 +7,10 @@ from __future__ import annotations
 
 import dataclasses
 
-SHARE_MODES = ("psse_load_record", "interpss_bus_total", "fraction:x")
+SHARE_MODES = ("gridpack", "psse_load_record", "interpss_bus_total", "fraction:x")
+NAMED_SHARES = SHARE_MODES[:3]
+HEATING = ("stalled", "gridpack")
+CONTACTORS = ("memory", "gridpack")
 VX_RULES = ("reference_running1", "spec_running2")
 EXTRA_VAR = ("load_end", "none")
 SHEDDING = ("end_use", "feeder")
@@ -20,28 +23,37 @@ class MotorOptions:
     (`jaxgrid.models.acmotor` docstring).
 
     Attributes:
-      share_mode: "psse_load_record" | "interpss_bus_total" | "fraction:x" (0 < x <= 1).
+      share_mode: "gridpack" | "psse_load_record" | "interpss_bus_total" | "fraction:x"
+        (0 < x <= 1).
       vx_rule: "reference_running1" | "spec_running2".
       curve_offsets: "v0" | "1pu".
       restall_b: let a restarted part B stall again (per-part timers).
+      heating: "stalled" | "gridpack": which ACMTBLU1 parts heat their windings.
+      contactor: "memory" | "gridpack": the ACMTBLU1 contactor's reclose rule.
       stiff_below: s; induction-motor subtransient stages faster than this are dropped
         (2 × a 5 ms step).
     """
 
-    share_mode: str = "psse_load_record"
+    share_mode: str = "gridpack"
     vx_rule: str = "reference_running1"
     curve_offsets: str = "v0"
     restall_b: bool = False
+    heating: str = "stalled"
+    contactor: str = "memory"
     stiff_below: float = 0.01
 
     def __post_init__(self):
-        if self.share_mode not in SHARE_MODES[:2]:
+        if self.share_mode not in NAMED_SHARES:
             x = self.share_fraction
             if x is None or not 0.0 < x <= 1.0:
                 raise ValueError(f"share_mode = {self.share_mode!r}: allowed "
                                  f"{', '.join(SHARE_MODES)} with 0 < x <= 1")
         if self.vx_rule not in VX_RULES:
             raise ValueError(f"vx_rule = {self.vx_rule!r}: allowed {', '.join(VX_RULES)}")
+        if self.contactor not in CONTACTORS:
+            raise ValueError(f"contactor = {self.contactor!r}: allowed {', '.join(CONTACTORS)}")
+        if self.heating not in HEATING:
+            raise ValueError(f"heating = {self.heating!r}: allowed {', '.join(HEATING)}")
         if self.curve_offsets not in ("v0", "1pu"):
             raise ValueError(f"curve_offsets = {self.curve_offsets!r}: allowed 'v0' or '1pu'")
         if not self.stiff_below >= 0:

@@ -122,7 +122,7 @@ def build(grid: GridSource, name: str | None = None,
     options = CompileOptions(strict=compile.strict, loads=compile.loads,
                              load_buses=env_values["action_buses"], motors=compile.motors,
                              composite=compile.composite, precision=compile.precision,
-                             sweeps=compile.sweeps)
+                             sweeps=compile.sweeps, machine_base=compile.machine_base)
     flows = [solve(p.case) for p in source.points]
     models = [compile_model(p.case, source.dyr, options, pf=flow)
               for p, flow in zip(source.points, flows)]

@@ -65,6 +65,7 @@ class CompileSettings:
     strict: bool = True
     precision: str = "float32"
     sweeps: int | None = None
+    machine_base: str = "gridpack"
     motors: MotorOptions = MotorOptions()
     loads: LoadSplit = LoadSplit()
     composite: CompositeOptions = CompositeOptions()
