@@ -5,12 +5,15 @@
     mpc[:name=value,...]  model-predictive control (`baselines.mpc.MpcOptions` options)
     policy:PATH           a saved PARS policy (`ars.train`, `experiments.train`)
     ppo:PATH              a saved PPO policy (`baselines.ppo`, `experiments.train_ppo`)
+    rlgc:FILE             a network the PARS study published (`baselines.rlgc`)
 
 A saved policy is a folder of policy.json and policy.npz: policy.json holds "spec" (what
 rebuilds the network), "kind" (absent for PARS, "ppo" for PPO) and the run's information,
 among it "layout" (`jaxgrid.rollouts.layout`: the buses it observes and acts on, checked
-against the study it is evaluated on) and "history"; policy.npz holds the arrays.
-`controller(spec, env)` gives (policy_apply, params, carry) for `LoadSheddingEnv.rollout`.
+against the study it is evaluated on) and "history"; policy.npz holds the arrays. A published
+network states its own layout by bus numbers (`baselines.rlgc_layouts`) and picks its inputs
+from the study's observation. `controller(spec, env)` gives (policy_apply, params, carry)
+for `LoadSheddingEnv.rollout`.
 """
 from __future__ import annotations
 
@@ -20,7 +23,7 @@ from jaxgrid.env import LoadSheddingEnv
 from jaxgrid.rollouts import GRID_VMAPS, layout
 from jaxgrid.study import Study
 
-SPECS = "none, uvls, mpc[:OPTIONS], policy:PATH or ppo:PATH"
+SPECS = "none, uvls, mpc[:OPTIONS], policy:PATH, ppo:PATH or rlgc:FILE"
 SAVED_KINDS = {"policy:": None, "ppo:": "ppo"}  # spec prefix -> the "kind" policy.json holds
 
 
@@ -32,8 +35,12 @@ def no_control(env: LoadSheddingEnv):
 
 def saved_policy(control: str):
     """(Policy, (θ, mean, std), info) of a "policy:PATH" controller, (PolicyInfo, params,
-    info) of a "ppo:PATH" one, read once; else None. ValueError if PATH holds no saved
-    policy or one of the other kind."""
+    info) of a "ppo:PATH" one, (RlgcPolicy, params, {"history"}) of a "rlgc:FILE" one, read
+    once; else None. ValueError if PATH holds no saved policy or one of the other kind."""
+    if control.startswith("rlgc:"):
+        from baselines.rlgc import read_policy
+        policy, params = read_policy(control.removeprefix("rlgc:"))
+        return policy, params, {"history": policy.history}
     prefix = next((p for p in SAVED_KINDS if control.startswith(p)), None)
     if prefix is None:
         return None
@@ -90,6 +97,10 @@ def controller(spec: str, env: LoadSheddingEnv, saved=None):
         info, params, _ = saved or saved_policy(spec)
         _check_inputs(spec, info.obs_size, env)
         return cached_apply(info), params, None
+    if spec.startswith("rlgc:"):
+        from baselines.rlgc import rlgc_apply
+        policy, params, _ = saved or saved_policy(spec)
+        return rlgc_apply(policy, env), params, policy.network.initial_carry()
     raise ValueError(f"--controller {spec!r}: allowed {SPECS}")
 
 

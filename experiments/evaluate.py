@@ -1,6 +1,7 @@
 """Evaluate a load-shedding controller on a study's task set, at every operating point.
 
-    python -m experiments.evaluate --study ieee39_fidvr|FILE.toml --controller none|uvls|mpc|policy:PATH|ppo:PATH \
+    python -m experiments.evaluate --study ieee39_fidvr|FILE.toml \
+        --controller none|uvls|mpc|policy:PATH|ppo:PATH|rlgc:FILE \
         --tasks train|test|NAME|FILE.json --out results.json [--plot DIR]
     python -m experiments.evaluate --raw R1 R2 --dyr D --task-config J ... (a study from files)
 
@@ -13,7 +14,11 @@ with the study's operating points, make the set. Writes {"study", "controller", 
 the recovery envelope and the total load shed against time. All operating points run in one
 compiled, vmapped call. The controllers are `baselines.controllers`'; a saved policy (PARS:
 policy:PATH, PPO: ppo:PATH, a folder written by `experiments.train` or
-`experiments.train_ppo`) must observe and act on the study's buses.
+`experiments.train_ppo`) must observe and act on the study's buses; a published network
+(rlgc:FILE, `baselines.rlgc`) picks its own buses from the study's observation. Where a
+published file has a training log beside it, each task of the first operating point that
+the log has gains "log_reward" (null for the others), and the result "log" {"path",
+"iteration"}: `experiments.compare` sets them side by side.
 """
 from __future__ import annotations
 
@@ -25,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from baselines.controllers import check_layout, controller, saved_policy
+from baselines.rlgc import training_log
 from experiments.studyargs import add_study_arguments, study_from_args
 from jaxgrid.recovery import envelope
 from jaxgrid.rollouts import rollout_specs
@@ -62,6 +68,7 @@ def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
     """The results dict of the module docstring (and figures in plot_dir). `tasks`: a task
     set name, a PNNL task JSON, or a list of TaskSpec."""
     env, apply, policy_params, carry = controlled_env(study, control)
+    log = training_log(control.removeprefix("rlgc:")) if control.startswith("rlgc:") else None
     for k, point in enumerate(study.points):
         unchecked = env.unchecked_buses(study.params, study.point(k))
         if unchecked:
@@ -79,11 +86,18 @@ def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
         for k in np.argsort(out["reward"], kind="stable")[:plot_count]:
             _plot(Path(plot_dir), specs[k], study, env, out, int(k), control)
     rewards = [r["reward"] for r in rows]
-    return {"study": study.name, "controller": control,
-            "points": [p.label for p in study.points], "tasks": rows,
-            "summary": {"n_tasks": len(rows), "n_recovered": sum(r["recovered"] for r in rows),
-                        "mean_reward": float(np.mean(rewards)),
-                        "total_shed_mw": float(sum(r["shed_mw"] for r in rows))}}
+    result = {"study": study.name, "controller": control,
+              "points": [p.label for p in study.points], "tasks": rows,
+              "summary": {"n_tasks": len(rows),
+                          "n_recovered": sum(r["recovered"] for r in rows),
+                          "mean_reward": float(np.mean(rewards)),
+                          "total_shed_mw": float(sum(r["shed_mw"] for r in rows))}}
+    if log is not None:
+        for row in rows:
+            row["log_reward"] = log.reward(row["fault_bus"], row["fault_duration"],
+                                           row["fault_start"]) if row["point"] == 0 else None
+        result["log"] = {"path": log.path, "iteration": log.iteration}
+    return result
 
 
 def _plot(folder: Path, spec, study: Study, env, out, k, control: str) -> None:
@@ -122,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     add_study_arguments(p, "ieee39_fidvr")
     p.add_argument("--controller", default="none",
                    help="none | uvls | mpc[:horizon=1,every=2,...] | policy:PATH (PARS) | "
-                        "ppo:PATH (PPO)")
+                        "ppo:PATH (PPO) | rlgc:FILE.npz (a network the PARS study published)")
     p.add_argument("--tasks", default="test", help="task set name, or a PNNL task JSON")
     p.add_argument("--out", default="results/evaluate.json")
     p.add_argument("--plot", help="folder for figures of the lowest-reward tasks")

@@ -6,10 +6,11 @@
     obs, state, reward, done, info = env.step(state, action, params, grid)
 
 Every agent step (0.1 s) the action sheds, per action bus, a fraction of its initial load
-(in [-0.2, 0], negative sheds, clipped to what remains); the grid then runs for one agent
-step of simulation steps. The observation is the voltage magnitude at the observed buses
-and (unless `include_action_status` is off) the remaining load fraction at the action
-buses, optionally the last k of them stacked.
+(in [-0.2, 0], negative sheds, clipped to what remains; requests up to `action_deadband`
+are dropped); the grid then runs for one agent step of simulation steps. The observation is
+the voltage magnitude at the observed buses and (unless `include_action_status` is off) the
+remaining load fraction at the action buses, optionally the last k of them stacked: one
+per agent step, or one every `obs_interval` seconds within it.
 The reward per step is
 
     c1·Σ_i ΔV_i − c2·Σ_j ΔP_j − c3·n_invalid − c_pre·n_prefault,
@@ -97,6 +98,8 @@ def check_params(values: dict, key=lambda field: field) -> None:
 AGENT_DT = Range(0.0, 60.0, "s", lo_open=True)
 EPISODE = Range(0.0, 3600.0, "s", lo_open=True)
 HISTORY = Range(1, 1000, "observations")
+OBS_INTERVAL = Range(0.0, 60.0, "s", lo_open=True)
+ACTION_DEADBAND = Range(0.0, 1.0, "of the initial load per step")
 FINE_WINDOW = Range(0.0, 3600.0, "s after clearing")
 SWEEPS = Range(1, 100, "network sweeps")
 MOTOR_STEPS = ("exponential", "rosenbrock")  # EnvConfig.motor_step
@@ -123,8 +126,15 @@ class EnvConfig:
         written study, so run folders named by earlier studies keep their names.
       agent_dt: control step, s.  episode: length, s.
       history: number of last observations stacked (1: just the current one).
+      obs_interval: s between the stacked observations, a whole fraction of agent_dt and a
+        whole number of simulation steps; each agent step then appends agent_dt/obs_interval
+        observations, the last at its end (HADREC's GridPACK environment samples every
+        0.02 s). None: one per agent step, at its end.
       include_action_status: the observation ends with the connected load fraction at the
         action buses (PNNL includeActionStatusInObservations).
+      action_deadband: a request to shed at most this fraction of a bus's initial load is
+        dropped: not applied and not penalised (HADREC's GridPACK environment: 0.01). 0:
+        every request counts.
       recovery_buses: the observed buses the recovery check covers (None: all of them).
       bounds: divergence bounds of the simulation.
     """
@@ -139,7 +149,9 @@ class EnvConfig:
     agent_dt: float = 0.1
     episode: float = 10.0
     history: int = 1
+    obs_interval: float | None = None
     include_action_status: bool = True
+    action_deadband: float = 0.0
     recovery_buses: tuple[int, ...] | None = None
     bounds: Bounds = Bounds()
 
@@ -157,12 +169,17 @@ class EnvConfig:
             if self.coarse_sweeps is not None:
                 check_int("coarse_sweeps", self.coarse_sweeps, SWEEPS)
             steps["coarse_dt"] = self.coarse_dt
-        for name, dt in steps.items():
-            ratio = self.agent_dt / dt
-            if not (abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
-                raise InputError("agent_dt", self.agent_dt, "must be a whole number (>= 1) "
-                                 f"of simulation steps {name} = {dt} s")
+        spans = {"agent_dt": self.agent_dt}
+        if self.obs_interval is not None:
+            OBS_INTERVAL.check("obs_interval", self.obs_interval)
+            _check_whole("agent_dt", self.agent_dt, "observation intervals obs_interval",
+                         self.obs_interval)
+            spans["obs_interval"] = self.obs_interval
+        for span, length in spans.items():
+            for name, dt in steps.items():
+                _check_whole(span, length, f"simulation steps {name}", dt)
         check_int("history", self.history, HISTORY)
+        ACTION_DEADBAND.check("action_deadband", self.action_deadband)
         if EPISODE.check("episode", self.episode) < self.agent_dt:
             raise InputError("episode", self.episode, f"must be >= agent_dt = {self.agent_dt} s")
         for name in ("observed_buses", "action_buses", "recovery_buses"):
@@ -196,6 +213,17 @@ class EnvConfig:
         """Agent steps per episode."""
         return int(round(self.episode / self.agent_dt))
 
+    @property
+    def samples_per_step(self) -> int:
+        """Observations appended to the history per agent step."""
+        return 1 if self.obs_interval is None else int(round(self.agent_dt / self.obs_interval))
+
+
+def _check_whole(name: str, span: float, what: str, unit: float) -> None:
+    """InputError naming `name` unless `span` (s) is a whole number (>= 1) of `unit` (s)."""
+    ratio = span / unit
+    if not (abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
+        raise InputError(name, span, f"must be a whole number (>= 1) of {what} = {unit} s")
 
 
 @struct.dataclass
@@ -368,19 +396,45 @@ class LoadSheddingEnv:
                                   fault, jacobian)
         return checked(x, new, health, residual, t + cfg.agent_dt, cfg.bounds)
 
+    def _advance_observed(self, grid: GridModel, x: GridState, health: Health, t, task: Task,
+                          fault, done):
+        """(grid state, health, vm (n_observed,) at the step's end, observations
+        (samples_per_step, n_obs)) one agent step after x at t (s): `_advance` and an
+        observation at its end, or, with obs_interval, one `_advance` of obs_interval and
+        an observation after each."""
+        cfg = self.config
+        if cfg.obs_interval is None:
+            x, health = self._advance(grid, x, health, t, task, fault, done)
+            vm, obs = self._observe(grid, x, t + cfg.agent_dt, task, fault)
+            return x, health, vm, obs[None]
+        interval = self.with_config(agent_dt=cfg.obs_interval, obs_interval=None)
+
+        def sample(carry, k):
+            x, health = carry
+            start = t + k * cfg.obs_interval
+            x, health = interval._advance(grid, x, health, start, task, fault, done)
+            return (x, health), interval._observe(grid, x, start + cfg.obs_interval, task,
+                                                  fault)
+
+        (x, health), (vm, obs) = jax.lax.scan(sample, (x, health),
+                                              jnp.arange(cfg.samples_per_step))
+        return x, health, vm[-1], obs
+
     def step(self, state: EnvState, action, params: EnvParams, grid: GridModel):
         """(obs, state, reward, done, info) after one agent step with `action` (n_action,)."""
         cfg, task = self.config, state.task
         real = grid.network.real_dtype
         t = state.step.astype(real) * cfg.agent_dt
         request = -clip_closed(action, params.action_low, params.action_high)  # >= 0
+        if cfg.action_deadband > 0:
+            request = jnp.where(request > cfg.action_deadband, request, 0.0)
         left = state.grid.load_left[self.action_slots]
         amount = jnp.minimum(request, left)
         x = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
         fault = self._fault(grid, task)
-        x, health = self._advance(grid, x, state.health, t, task, fault, state.done)
+        x, health, vm, observed = self._advance_observed(grid, x, state.health, t, task, fault,
+                                                         state.done)
         t_next = t + cfg.agent_dt
-        vm, obs = self._observe(grid, x, t_next, task, fault)
         after = t_next - task.fault_end
         failed = recovery_failed(vm, state.recovery_check, after, params) | health.diverged
         shed_pu = shed_power(amount, grid.load_p0[self.action_slots])
@@ -390,7 +444,7 @@ class LoadSheddingEnv:
         reward = jnp.where(failed, -params.unstable_penalty, shaped)
         truncated = state.step + 1 >= cfg.n_steps
         done = failed | truncated
-        history = jnp.concatenate([state.history[1:], obs[None]])
+        history = jnp.concatenate([state.history, observed])[-cfg.history:]
         new = EnvState(grid=x, health=health, task=task, step=state.step + 1,
                        history=history, recovery_check=state.recovery_check, done=done)
         info = {"terminated": failed, "truncated": truncated & ~failed,

@@ -153,10 +153,13 @@ GRID_VMAPS = MinorVmaps()
 
 
 def layout(env_config: EnvConfig) -> dict:
-    """What a saved policy observes and acts on (checked when it is evaluated)."""
+    """What a saved policy observes and acts on (checked when it is evaluated); obs_interval
+    only where set, so the layouts of policies saved before it existed still match."""
+    interval = {} if env_config.obs_interval is None else {
+        "obs_interval": env_config.obs_interval}
     return {"observed_buses": list(env_config.observed_buses),
             "action_buses": list(env_config.action_buses), "history": env_config.history,
-            "include_action_status": env_config.include_action_status}
+            "include_action_status": env_config.include_action_status, **interval}
 
 
 @dataclasses.dataclass(frozen=True)

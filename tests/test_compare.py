@@ -38,3 +38,28 @@ def test_refuses_results_on_other_tasks(tmp_path):
     other = _result(tmp_path, "uvls", {2: (-10, 0, True)})
     with pytest.raises(ValueError, match="other tasks"):
         compare([none, other])
+
+
+def test_a_published_policy_is_set_against_its_training_log(tmp_path):
+    """Tasks with a logged reward ("log_reward", experiments.evaluate of rlgc:FILE) are listed
+    beside it, printed and drawn; tasks the log lacks are left out."""
+    from experiments.compare import main
+
+    rows = {4: (-700.0, 250.0, True), 15: (-1200.0, 400.0, False), 2: (-5.0, 0.0, True)}
+    tasks = [{"fault_bus": bus, "fault_duration": 0.05, "operating_point": "base",
+              "fault_start": 1.0, "reward": reward, "shed_mw": shed, "recovered": ok,
+              "log_reward": {4: -247.5, 15: -238.1}.get(bus)}
+             for bus, (reward, shed, ok) in rows.items()]
+    path = tmp_path / "rlgc.json"
+    path.write_text(json.dumps({
+        "study": "ieee39_pnnl_gp", "controller": "rlgc:v5/policy_plus500.npz", "tasks": tasks,
+        "log": {"path": "v5/log.txt", "iteration": 500},
+        "summary": {"n_tasks": 3, "n_recovered": 2, "mean_reward": -635.0,
+                    "total_shed_mw": 650.0}}))
+    main([str(path), "--out", str(tmp_path / "out.json"), "--plot", str(tmp_path / "figs")])
+    report = json.loads((tmp_path / "out.json").read_text())
+    entry = report["against_log"]["rlgc:v5/policy_plus500.npz"]
+    assert entry["log"]["iteration"] == 500
+    assert [(t["fault_bus"], t["reward"], t["log_reward"], t["recovered"])
+            for t in entry["tasks"]] == [(4, -700.0, -247.5, True), (15, -1200.0, -238.1, False)]
+    assert (tmp_path / "figs" / "v5_policy_plus500_log.png").stat().st_size > 10_000

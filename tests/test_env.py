@@ -88,6 +88,43 @@ def test_pre_fault_shedding_step_by_hand(env, grid, tasks):
     assert float(info["shed_pu"]) == 0.0
 
 
+def test_requests_within_the_action_deadband_are_dropped(study, grid, tasks):
+    """action_deadband = 0.01 (HADREC's GridPACK environment): a request of 0.5 % is neither
+    applied nor charged (shed or pre-fault), one of 2 % is both."""
+    env = study.env(action_deadband=0.01)
+    params = EnvParams()
+    _, state = env.reset(None, tasks[2], params, grid)
+    _, state, reward, _, info = jax.jit(env.step)(state, jnp.array([-0.005, -0.02, 0.0]),
+                                                  params, grid)
+    p0 = float(grid.load_p0[env.action_slots[1]])
+    assert float(info["shed_pu"]) == pytest.approx(0.02 * p0, rel=1e-5)
+    assert float(reward) == pytest.approx(-150.0 * 0.02 * p0 - 100.0, rel=1e-5)
+    assert np.asarray(state.grid.load_left[env.action_slots]) == pytest.approx([1.0, 0.98, 1.0])
+
+
+def test_observations_every_obs_interval_end_with_the_agent_step_s_own(study, grid, tasks):
+    """obs_interval = 0.02 s (HADREC's GridPACK environment): a 0.1-s agent step appends 5
+    observations to the stacked history, the last the one-per-step observation (the same
+    simulation steps, run in five parts), the others the fault's course within the step."""
+    params = EnvParams()
+    zero = jnp.zeros(3)
+    stepped = []
+    for env in (study.env(history=10), study.env(history=10, obs_interval=0.02)):
+        _, state = env.reset(None, tasks[2], params, grid)
+        state = state.replace(step=jnp.asarray(10, jnp.int32))  # 1.0-1.1 s: the fault 1.0-1.08
+        stepped.append(jax.jit(lambda s, g, env=env: env.step(s, zero, params, g))(state, grid))
+    (_, plain, reward, _, _), (obs, sampled, sampled_reward, _, _) = stepped
+    assert sampled.history.shape == (10, 11) and obs.shape == (110,)
+    np.testing.assert_allclose(sampled.history[-1], plain.history[-1], atol=1e-5)
+    np.testing.assert_array_equal(sampled.history[:5], plain.history[:5])  # reset's, copied
+    bus4 = np.asarray(sampled.history[5:, 0])  # at 1.02, 1.04, 1.06 s, cleared at 1.08, 1.1
+    assert (bus4[:3] < 0.5).all() and (bus4[3:] > 0.5).all(), bus4
+    assert float(sampled_reward) == pytest.approx(float(reward), abs=1e-3)
+    with pytest.raises(ValueError, match=r"agent_dt = 0.1: must be a whole number \(>= 1\) "
+                                         r"of observation intervals obs_interval = 0.03 s"):
+        study.env(obs_interval=0.03)
+
+
 def zero_policy(params, obs, carry):
     return jnp.zeros(3), carry
 

@@ -266,7 +266,7 @@ def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):
     write_study(pnnl39, path)
     data = tomllib.loads(path.read_text())
     assert set(data["env"]) == {f.name for f in dataclasses.fields(pnnl39.config)} - {
-        "recovery_buses", "coarse_dt", "coarse_sweeps", "motor_step"}, \
+        "recovery_buses", "coarse_dt", "coarse_sweeps", "motor_step", "obs_interval"}, \
         "None fields are left out, every other one is explicit"
     assert set(data["params"]) == {f.name for f in dataclasses.fields(EnvParams)}
     assert all(p.startswith("/") for p in data["grid"]["raw"]), "absolute paths"
@@ -423,6 +423,28 @@ def test_pnnl_39_bus_study_file_has_the_papers_settings(shared_cases):
     assert (study.params.action_low, study.params.action_high) == (-0.2, 0.0)
     assert [study.history(k) for k in ("linear", "fnn", "lstm")] == [10, 10, 1]
     assert (study.config.dt, study.point(0).sweeps) == (0.002, 1)
+
+
+def test_pnnl_39_bus_gridpack_study_file_is_the_published_policies_environment(shared_cases):
+    """studies/ieee39_pnnl_gp.toml: HADREC's GridPACK environment of the published 39-bus
+    networks: the GridPACK task file's buses, faults, reward and 8-s recovery time, 81 agent
+    steps (so the recovery check, 8 s after clearing, falls after every episode), samples
+    every 0.02 s and requests up to 1 % dropped."""
+    study = read_study(REPO / "studies" / "ieee39_pnnl_gp.toml")
+    config, params = study.config, study.params
+    assert (config.observed_buses, config.action_buses) == ((504, 507, 508, 518),
+                                                            (504, 507, 518))
+    assert sorted((s.fault_bus, s.fault_duration, s.fault_start)
+                  for s in study.tasks("train")) == [
+        (b, d, 1.0) for b in (4, 15, 21) for d in (0.0, 0.05, 0.08)]
+    assert (params.c_voltage, params.c_shed, params.c_invalid, params.c_prefault,
+            params.unstable_penalty, params.recovery_level, params.recovery_time,
+            params.action_low, params.action_high) == (260, 150, 3, 100, 1000, 0.95, 8.0,
+                                                       -0.2, 0.0)
+    assert config.n_steps == 81 and 1.0 + params.recovery_time > config.episode
+    assert (config.samples_per_step, config.action_deadband) == (5, 0.01)
+    assert [study.history(k) for k in ("linear", "fnn", "lstm")] == [10, 10, 1]
+    assert len(study.tasks("test")) == 120
 
 
 # --------------------------------------------------------------------------- #

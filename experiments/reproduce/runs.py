@@ -430,13 +430,13 @@ def _sized(study: Study, settings: Settings) -> Study:
 
 
 def _identity(control: str) -> str:
-    """A controller spec with a policy path replaced by the policy's content hash, so an
-    evaluation is recomputed when the policy changes."""
+    """A controller spec with a policy path (a folder, or an rlgc file) replaced by the
+    policy's content hash, so an evaluation is recomputed when the policy changes."""
     kind, _, path = control.partition(":")
-    if kind not in ("policy", "ppo"):
+    if kind not in ("policy", "ppo", "rlgc"):
         return control
     digest = hashlib.sha1()
-    for file in sorted(Path(path).glob("**/*")):
+    for file in [Path(path)] if kind == "rlgc" else sorted(Path(path).glob("**/*")):
         if file.is_file():
             digest.update(file.read_bytes())
     return f"{kind}:{digest.hexdigest()[:10]}"
