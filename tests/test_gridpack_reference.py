@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from conftest import SHARED_CASES
-from experiments.reference.gridpack import against, load_reference, worst
+from experiments.reference.comparison import against, worst
+from experiments.reference.gridpack_files import load_reference
 from jaxgrid.compile import CompileOptions, ModelError, compile_model
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
