@@ -44,5 +44,6 @@ reproduce-pnnl300:  ## the paper's settings on the PNNL 300-bus study, results/p
 	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.reproduce \
 		--study studies/ieee300_pnnl.toml --out results/pnnl300
 
-clean:
-	rm -rf $(VENV) results benchmarks/cpu .pytest_cache
+clean:  ## what the project generates (not results/: the committed reports and policies)
+	rm -rf $(VENV) runs benchmarks/cpu .pytest_cache .hypothesis build dist *.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

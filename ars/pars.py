@@ -154,12 +154,13 @@ def _init(policy: Policy, config: ParsConfig, key) -> TrainState:
 
 
 def normalized_policy(policy: Policy, network: Callable = _unchanged):
-    """policy_apply(params, obs, carry) with params = (θ, mean, std) that normalises the
-    observation and accumulates its sums (count, Σx, Σx²) in the carry. The network runs as
-    `network(policy.apply)` (`Vmaps.network`)."""
+    """policy_apply(params, obs, carry, inputs) with params = (θ, mean, std) that normalises
+    the observation and accumulates its sums (count, Σx, Σx²) in the carry; `inputs`, what
+    else the episode gives its controllers (e.g. `jaxgrid.episode.ControlInputs`), is unused.
+    The network runs as `network(policy.apply)` (`Vmaps.network`)."""
     net = network(policy.apply)
 
-    def apply(params, obs, carry):
+    def apply(params, obs, carry, inputs):
         theta, mean, std = params
         net_carry, (count, total, total_sq) = carry
         action, net_carry = net(theta, (obs - mean) / std, net_carry)

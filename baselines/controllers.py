@@ -13,7 +13,8 @@ among it "layout" (`jaxgrid.rollouts.layout`: the buses it observes and acts on,
 against the study it is evaluated on) and "history"; policy.npz holds the arrays. A published
 network states its own layout by bus numbers (`baselines.rlgc_layouts`) and picks its inputs
 from the study's observation. `controller(spec, env)` gives (policy_apply, params, carry)
-for `LoadSheddingEnv.rollout`.
+for `jaxgrid.episode.rollout`; every policy_apply is a controller of its one signature,
+policy_apply(params, obs, carry, inputs) -> (action, carry).
 """
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ SAVED_KINDS = {"policy:": None, "ppo:": "ppo"}  # spec prefix -> the "kind" poli
 def no_control(env: LoadSheddingEnv):
     """(policy_apply, params, carry) of a controller that never sheds."""
     n = len(env.action_slots)
-    return (lambda params, obs, carry: (jnp.zeros(n), carry)), None, None
+    return (lambda params, obs, carry, inputs: (jnp.zeros(n), carry)), None, None
 
 
 def saved_policy(control: str):

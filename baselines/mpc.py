@@ -7,10 +7,11 @@ buses, fractions of the initial load in [0, −action_low]), and improves the pl
 `iterations` projected Adam steps on ∇u of the predicted return (`jax.grad` through
 `LoadSheddingEnv.step`, optax). It applies the plan's first action, shifts the plan by one
 step as the next decision's warm start, and decides again `every` agent steps. Everything
-is one jittable `Planner`, so a test set is one compiled, vmapped program:
+is one jittable controller of `jaxgrid.episode` that plans from the episode's state (its
+`plans = True`: the episode loop is a scan), so a test set is one compiled, vmapped program:
 
     planner, params, carry = mpc_controller(env, MpcOptions(horizon=1.0))
-    out = env.rollout(planner, params, tasks, env_params, grid, carry)
+    out = jaxgrid.episode.rollout(env, planner, params, tasks, env_params, grid, carry)
 
 The prediction model (choices, documented where they differ from the plant):
   * Gradient surrogate: stall, stall jump and restart of the motors are switches with zero
@@ -37,7 +38,8 @@ import numpy as np
 import optax
 from flax import struct
 
-from jaxgrid.env import EnvParams, EnvState, LoadSheddingEnv, PlanInputs, Planner
+from jaxgrid.env import EnvParams, EnvState, LoadSheddingEnv
+from jaxgrid.episode import ControlInputs
 from jaxgrid.grid import GridModel
 
 # Each option: (allowed low, high, meaning); the one table `parse_options` checks.
@@ -172,11 +174,14 @@ def decide(env: LoadSheddingEnv, iterations: int, plan, state: EnvState, params:
     return best_plan, best, values[0]
 
 
-class Mpc(Planner):
-    """The receding-horizon controller (module docstring) for `LoadSheddingEnv.episode`.
+class Mpc:
+    """The receding-horizon controller (module docstring) for `jaxgrid.episode`.
 
-    Carry: the current plan (H, n_action); policy params: `MpcParams`.
+    Carry: the current plan (H, n_action); controller params: `MpcParams`. `plans`: the
+    episode runs it in a scan, so the step index of its `lax.cond` is not batched.
     """
+
+    plans = True
 
     def __init__(self, env: LoadSheddingEnv, options: MpcOptions):
         cfg = env.config
@@ -190,14 +195,14 @@ class Mpc(Planner):
             raise ValueError(f"MPC horizon = {options.horizon} s is {self.steps} agent steps "
                              f"of {cfg.agent_dt} s: it must cover every = {options.every}")
 
-    def plan(self, plan, inputs: PlanInputs, mpc: MpcParams):
+    def plan(self, plan, inputs: ControlInputs, mpc: MpcParams):
         """The plan after one decision from the episode's state."""
         grid = surrogate_model(inputs.grid, mpc.width, mpc.timer_width)
         state = known_task(inputs.state, self.agent_dt)
         return decide(self.prediction, self.options.iterations, plan, state, inputs.params,
                       grid, mpc)[0]
 
-    def __call__(self, mpc: MpcParams, obs, plan, inputs: PlanInputs):
+    def __call__(self, mpc: MpcParams, obs, plan, inputs: ControlInputs):
         del obs  # the MPC reads the simulator state
         plan = jax.lax.cond(inputs.step % self.options.every == 0,
                             lambda p: self.plan(p, inputs, mpc), lambda p: p, plan)
@@ -207,8 +212,8 @@ class Mpc(Planner):
 
 
 def mpc_controller(env: LoadSheddingEnv, options: MpcOptions | None = None):
-    """(planner, MpcParams, initial plan of zeros (H, n_action)) for `env.rollout` and
-    `experiments.evaluate --controller mpc:...`."""
+    """(planner, MpcParams, initial plan of zeros (H, n_action)) for
+    `jaxgrid.episode.rollout` and `experiments.evaluate --controller mpc:...`."""
     options = options or MpcOptions()
     planner = Mpc(env, options)
     real = np.float64 if env.precision == "float64" else np.float32

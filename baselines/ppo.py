@@ -337,6 +337,15 @@ def make_ppo(env: environment.Environment, env_params, config: PPOConfig) -> PPO
 # --------------------------------------------------------------------------- #
 
 
+class GaussianMeanPolicy(GaussianPolicy):
+    """rejax's GaussianPolicy (the same parameters) with the deterministic action a trained
+    policy takes: its mean. rejax's public methods only sample (`act`, `__call__`)."""
+
+    def mean(self, obs):
+        """(batch, action_dim) mean action of (batch, obs_size) observations."""
+        return self.action_mean(self.features(obs))
+
+
 @dataclasses.dataclass(frozen=True)
 class PolicyInfo:
     """What rebuilds a saved PPO actor (the `policy.json` "spec").
@@ -355,12 +364,12 @@ class PolicyInfo:
     action_high: float
     normalize_actions: bool
 
-    def actor(self) -> GaussianPolicy:
+    def actor(self) -> GaussianMeanPolicy:
         import flax.linen as nn
 
         bounds = (-1.0, 1.0) if self.normalize_actions else (self.action_low, self.action_high)
-        return GaussianPolicy(self.action_dim, bounds, tuple(self.hidden),
-                              getattr(nn, self.activation))
+        return GaussianMeanPolicy(self.action_dim, bounds, tuple(self.hidden),
+                                  getattr(nn, self.activation))
 
 
 def policy_info(algo: PPO) -> PolicyInfo:
@@ -370,20 +379,17 @@ def policy_info(algo: PPO) -> PolicyInfo:
                       algo.actor.activation.__name__, env.low, env.high, env.normalize_actions)
 
 
-def _mean_action(module, obs):
-    return module._action_dist(obs).mean()
-
-
 def make_apply(info: PolicyInfo):
-    """policy_apply(params, obs (obs_size,), carry) -> (action (action_dim,), carry): the
-    Gaussian's mean of the normalised observation, clipped to the policy's bounds and mapped
-    onto [action_low, action_high]; params = {"actor", "obs_mean", "obs_var"}."""
+    """policy_apply(params, obs (obs_size,), carry, inputs) -> (action (action_dim,), carry):
+    the Gaussian's mean of the normalised observation, clipped to the policy's bounds and
+    mapped onto [action_low, action_high] (`inputs` unused); params = {"actor", "obs_mean",
+    "obs_var"}."""
     actor = info.actor()
     low, high = actor.action_range
 
-    def apply(params, obs, carry):
+    def apply(params, obs, carry, inputs):
         x = (obs - params["obs_mean"]) / jnp.sqrt(params["obs_var"] + 1e-8)  # rejax's form
-        mean = actor.apply(params["actor"], x[None], method=_mean_action)[0]
+        mean = actor.apply(params["actor"], x[None], method="mean")[0]
         action = jnp.clip(mean, low, high)
         if info.normalize_actions:
             action = info.action_low + (action + 1.0) * (0.5 * (info.action_high -

@@ -208,11 +208,11 @@ def _check_params_json(policy: RlgcPolicy) -> None:
 
 
 def rlgc_apply(policy: RlgcPolicy, env: LoadSheddingEnv):
-    """policy_apply(params, obs, carry) -> (action (n_action,), carry) of `policy` on `env`,
-    whose history must be policy.history: its inputs picked from each stacked observation,
-    normalised, the network, t mapped onto the layout's range and placed at the layout's
-    action buses (the env's other action buses shed nothing). ValueError naming the file if
-    the env does not observe or act on the layout's buses."""
+    """policy_apply(params, obs, carry, inputs) -> (action (n_action,), carry) of `policy` on
+    `env` (`inputs` unused), whose history must be policy.history: its inputs picked from
+    each stacked observation, normalised, the network, t mapped onto the layout's range and
+    placed at the layout's action buses (the env's other action buses shed nothing).
+    ValueError naming the file if the env does not observe or act on the layout's buses."""
     if env.config.history != policy.history:
         raise ValueError(f"{policy.path} stacks {policy.history} observations; the "
                          f"environment {env.config.history}")
@@ -234,7 +234,7 @@ class _Apply:
     low: float
     high: float
 
-    def __call__(self, params, obs, carry):
+    def __call__(self, params, obs, carry, inputs):
         x = obs.reshape(-1, self.obs_size)[:, np.array(self.picks)].reshape(-1)
         x = (x - params["mean"]) / (params["std"] + STD_EPS)
         t, carry = self.network.forward(params["matrices"], x, carry)

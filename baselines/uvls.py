@@ -13,7 +13,8 @@ of the bus's initial load, once (latched). The study's settings:
 A relay is a relay: it acts whenever the voltage is low, before, during or after a fault.
 
     policy_apply, policy_params, carry = uvls_policy(env)
-    out = env.rollout(policy_apply, policy_params, tasks, EnvParams(), carry)
+    out = jaxgrid.episode.rollout(env, policy_apply, policy_params, tasks, EnvParams(), grid,
+                                  carry)
 
 Time granularity. The relays run at the control step `env.config.agent_dt` (0.1 s in the
 study), on the voltage of the newest observation. Each low observation counts as one
@@ -183,15 +184,16 @@ def relay_step(params: UvlsParams, state: UvlsState, vm, left, agent_dt: float):
 
 
 def uvls_policy(env: LoadSheddingEnv, params: UvlsParams | None = None):
-    """UVLS relays at every action bus of `env`, as a policy for `env.rollout`.
+    """UVLS relays at every action bus of `env`, as a controller for `jaxgrid.episode`.
 
     Args:
       env: the environment (reads `config.observed_buses`, `action_buses`, `agent_dt`,
         `history`).  params: relay settings (default: the study's), checked here.
     Returns:
-      (policy_apply(params, obs, carry) -> (action (n_action,), carry), policy_params,
-      initial_carry): the action is −request (the env's sign: negative sheds); the carry is
-      a `UvlsState` of zeros, shared by all tasks of a rollout.
+      (policy_apply(params, obs, carry, inputs) -> (action (n_action,), carry),
+      policy_params, initial_carry): the action is −request (the env's sign: negative
+      sheds; `inputs` unused); the carry is a `UvlsState` of zeros, shared by all tasks of
+      a rollout.
     Raises:
       ValueError: an action bus is not observed, or a setting is out of range.
     """
@@ -212,7 +214,7 @@ def uvls_policy(env: LoadSheddingEnv, params: UvlsParams | None = None):
                       tripped=np.zeros((n_action, n_stage), bool),
                       owed=np.zeros(n_action, real))
 
-    def policy_apply(params: UvlsParams, obs, carry: UvlsState):
+    def policy_apply(params: UvlsParams, obs, carry: UvlsState, inputs):
         request, carry = relay_step(params, carry, obs[v_at], obs[left_at], agent_dt)
         return -request, carry
 

@@ -1,7 +1,7 @@
 """Compare controllers task by task from `experiments.evaluate` result files.
 
-    python -m experiments.compare results/none.json results/uvls.json results/policy.json
-    python -m experiments.compare results/rlgc.json --out results/rlgc_log.json --plot DIR
+    python -m experiments.compare runs/none.json runs/uvls.json runs/policy.json
+    python -m experiments.compare runs/rlgc.json --out runs/rlgc_log.json --plot DIR
 
 The first file is the reference that decides which tasks need shedding: those it does not
 recover. Prints, per controller, the summary (recovered, mean reward, MW shed), and for each

@@ -2,7 +2,7 @@
 set that fail without shedding.
 
     python -m experiments.tune_mpc --study ieee39_fidvr --tasks test --count 8 \
-        --candidates "" "width=0" "every=2" "horizon=2" --out results/tune_mpc.json
+        --candidates "" "width=0" "every=2" "horizon=2" --out runs/tune_mpc.json
 
 Each candidate (`baselines.mpc` options, "" for the defaults) runs on the same `--count`
 tasks (evenly spread over those that fail with no control); per candidate it writes the
@@ -19,7 +19,7 @@ import numpy as np
 from baselines.controllers import no_control
 from baselines.mpc import mpc_controller, parse_options
 from experiments.bench.timing import write_report
-from experiments.studyargs import add_study_arguments, study_from_args
+from experiments.common.studyargs import add_study_arguments, study_from_args
 from jaxgrid.rollouts import rollout_specs
 
 
@@ -44,7 +44,7 @@ def main(argv=None) -> None:
     p.add_argument("--tasks", default="test")
     p.add_argument("--count", type=int, default=8)
     p.add_argument("--candidates", nargs="+", default=["", "width=0", "every=2", "horizon=2"])
-    p.add_argument("--out", default="results/tune_mpc.json")
+    p.add_argument("--out", default="runs/tune_mpc.json")
     args = p.parse_args(argv)
     study = study_from_args(args)
     env = study.env()

@@ -233,10 +233,6 @@ class Case:
             raise KeyError(f"{self.name}: no bus numbered {missing}")
         return np.array([lookup[int(n)] for n in numbers], dtype=np.int64)
 
-    def buses_in_zone(self, zone: int) -> np.ndarray:
-        """Internal indices of the buses in `zone`."""
-        return np.flatnonzero(self.buses.zone == zone)
-
 
 # --------------------------------------------------------------------------- #
 # Building a case from reader rows

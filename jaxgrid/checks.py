@@ -7,22 +7,41 @@ reports a bad one as an `InputError` whose message names the key as the user wro
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+from collections.abc import Callable
 
 
 class InputError(ValueError):
     """A value outside its allowed range; `key` names it as written (file and key)."""
 
-    def __init__(self, key: str, value, reason: str):
+    def __init__(self, key: str, value, reason: str, related: tuple[str, ...] = ()):
         """Message "key = value: reason"; without a value (None) key + reason, the reason
-        then starting with its own separator (" is empty", ": buses [9] are not ...")."""
+        then starting with its own separator (" is empty", ": buses [9] are not ...").
+        related: the other fields the reason names ("dt" in "a whole number of steps dt")."""
         super().__init__(key + reason if value is None else f"{key} = {value!r}: {reason}")
-        self.key, self.value, self.reason = key, value, reason
+        self.key, self.value, self.reason, self.related = key, value, reason, related
 
-    def renamed(self, key: str) -> InputError:
-        """The same error under another name (e.g. with the file and section in front)."""
-        return InputError(key, self.value, self.reason)
+    def renamed(self, name: Callable[[str], str],
+                source: Callable[[str], str | None] | None = None) -> InputError:
+        """The same error with its key as the user wrote it, name(key) (e.g. with the file and
+        section in front), and each related field's source(field) (where its value was
+        written; None: say nothing) after the reason; source defaults to name."""
+        source = source or name
+        where = "".join(f" ({r}: {source(r)})" for r in self.related if source(r))
+        return InputError(name(self.key), self.value, self.reason + where)
+
+
+@contextlib.contextmanager
+def renamed_errors(name: Callable[[str], str],
+                   source: Callable[[str], str | None] | None = None):
+    """Re-raise an InputError from inside with its key as the user wrote it, name(key), and
+    where its related fields were written, source(field) (`InputError.renamed`)."""
+    try:
+        yield
+    except InputError as err:
+        raise err.renamed(name, source) from None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,10 +97,19 @@ def check_int(key: str, value, allowed: Range) -> int:
     return value
 
 
-def check_unique(key: str, values) -> None:
-    """InputError naming `key` when an entry repeats."""
+def check_unique(key: str, values, same=lambda v: v) -> None:
+    """InputError naming `key` when an entry repeats (entries compared as same(v), e.g.
+    str.lower)."""
     seen = set()
     for v in values:
-        if v in seen:
+        if same(v) in seen:
             raise InputError(key, list(values), f"{v} is listed more than once")
-        seen.add(v)
+        seen.add(same(v))
+
+
+def check_listed(key: str, values, what: str) -> None:
+    """InputError naming `key` when `values` is empty ("give at least one `what`") or an
+    entry repeats (a repeat would count twice, e.g. double a task's weight in sampling)."""
+    if not len(values):
+        raise InputError(key, None, f" is empty: give at least one {what}")
+    check_unique(key, values)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections import Counter
 from typing import NamedTuple
 
 import jax
@@ -23,7 +22,7 @@ from jaxgrid import network
 from jaxgrid.case import ISOLATED, PQ, Case
 from jaxgrid.dynamics import FAMILIES, derivatives, update_loads
 from jaxgrid.grid import DeviceGroup, GridModel, GridState
-from jaxgrid.io.dyr import DyrData, DyrError, DyrRecord
+from jaxgrid.io.dyr import DyrError
 from jaxgrid.models.acmotor import LOAD_MOTORS
 from jaxgrid.models.base import (Initial, LoadSite, ModelError, Signals, StartPoint,
                                  device_label)
@@ -36,6 +35,7 @@ from jaxgrid.models.loads import LoadSplit, split_bus_loads
 from jaxgrid.models.machines import MACHINES
 from jaxgrid.models.options import CompositeOptions, MotorOptions
 from jaxgrid.powerflow import PowerFlowResult, admittance_matrix, bus_loads, solve
+from jaxgrid.records import DyrData, DyrRecord
 
 LOAD_MODELS = {**LOAD_MOTORS, **INDUCTION_MOTORS}
 SUPPORTED = (tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS) + tuple(LOAD_MODELS)

@@ -5,6 +5,9 @@
     obs, state = env.reset(key, task, params, grid)
     obs, state, reward, done, info = env.step(state, action, params, grid)
 
+The episode loop (a controller acting every agent step, vmapped over tasks) is
+`jaxgrid.episode`.
+
 Every agent step (0.1 s) the action sheds, per action bus, a fraction of its initial load
 (in [-0.2, 0], negative sheds, clipped to what remains; requests up to `action_deadband`
 are dropped); the grid then runs for one agent step of simulation steps. The observation is
@@ -34,9 +37,8 @@ import numpy as np
 from flax import struct
 
 from jaxgrid import network
-from jaxgrid.batching import vmap_minor
 from jaxgrid.case import VOLTAGE
-from jaxgrid.checks import InputError, Range, check_int, check_unique
+from jaxgrid.checks import InputError, Range, check_int, check_listed
 from jaxgrid.dynamics import motor_jacobian
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope
@@ -115,7 +117,7 @@ class EnvConfig:
       coarse_dt: simulation step outside the fault window, s; None: dt throughout. An agent
         step that overlaps [fault start, clearing + fine_window) runs at dt, every other
         one at coarse_dt (the steady state before the fault and the slow recovery after
-        it). Its accuracy is measured like dt's (`experiments.step_accuracy`).
+        it). Its accuracy is measured like dt's (`experiments.diagnostics.step_accuracy`).
       fine_window: s after clearing that the step stays dt (used with coarse_dt).
       coarse_sweeps: network sweeps per solution at coarse_dt (None: the model's).
       motor_step: how the load models' motors are integrated (`MOTOR_STEPS`; None: the
@@ -161,32 +163,39 @@ class EnvConfig:
         if self.motor_step is not None and self.motor_step not in MOTOR_STEPS:
             raise InputError("motor_step", self.motor_step, f"must be one of {MOTOR_STEPS}")
         AGENT_DT.check("agent_dt", self.agent_dt)
+        FINE_WINDOW.check("fine_window", self.fine_window)  # unused values checked too
+        if self.coarse_sweeps is not None:
+            check_int("coarse_sweeps", self.coarse_sweeps, SWEEPS)
         steps = {"dt": self.dt}
         if self.coarse_dt is not None:
             coarse = Range(self.dt, DT.hi, "s (dt up to the largest step)")
-            coarse.check("coarse_dt", self.coarse_dt)
-            FINE_WINDOW.check("fine_window", self.fine_window)
-            if self.coarse_sweeps is not None:
-                check_int("coarse_sweeps", self.coarse_sweeps, SWEEPS)
+            reason = coarse.problem(self.coarse_dt)
+            if reason:
+                raise InputError("coarse_dt", self.coarse_dt, reason, related=("dt",))
             steps["coarse_dt"] = self.coarse_dt
         spans = {"agent_dt": self.agent_dt}
         if self.obs_interval is not None:
             OBS_INTERVAL.check("obs_interval", self.obs_interval)
-            _check_whole("agent_dt", self.agent_dt, "observation intervals obs_interval",
+            _check_whole("agent_dt", self.agent_dt, "observation intervals", "obs_interval",
                          self.obs_interval)
             spans["obs_interval"] = self.obs_interval
         for span, length in spans.items():
             for name, dt in steps.items():
-                _check_whole(span, length, f"simulation steps {name}", dt)
+                _check_whole(span, length, "simulation steps", name, dt)
         check_int("history", self.history, HISTORY)
         ACTION_DEADBAND.check("action_deadband", self.action_deadband)
         if EPISODE.check("episode", self.episode) < self.agent_dt:
-            raise InputError("episode", self.episode, f"must be >= agent_dt = {self.agent_dt} s")
-        for name in ("observed_buses", "action_buses", "recovery_buses"):
-            check_unique(name, getattr(self, name) or ())
-        outside = sorted(set(self.recovery_buses or ()) - set(self.observed_buses))
-        if outside:
-            raise ValueError(f"recovery_buses {outside} are not observed buses")
+            raise InputError("episode", self.episode, f"must be >= agent_dt = {self.agent_dt} s",
+                             related=("agent_dt",))
+        check_listed("observed_buses", self.observed_buses, "bus (the policy's inputs)")
+        check_listed("action_buses", self.action_buses, "bus (the policy's outputs)")
+        if self.recovery_buses is not None:
+            check_listed("recovery_buses", self.recovery_buses, "bus, or leave it out to "
+                         "check every observed bus")
+            outside = sorted(set(self.recovery_buses) - set(self.observed_buses))
+            if outside:
+                raise InputError("recovery_buses", list(self.recovery_buses), f"buses {outside} "
+                                 "are not observed buses", related=("observed_buses",))
 
     def steps_per_agent_step(self, dt: float) -> int:
         """Simulation steps of dt seconds in one agent step."""
@@ -219,11 +228,13 @@ class EnvConfig:
         return 1 if self.obs_interval is None else int(round(self.agent_dt / self.obs_interval))
 
 
-def _check_whole(name: str, span: float, what: str, unit: float) -> None:
-    """InputError naming `name` unless `span` (s) is a whole number (>= 1) of `unit` (s)."""
+def _check_whole(name: str, span: float, what: str, unit_name: str, unit: float) -> None:
+    """InputError naming `name` unless `span` (s) is a whole number (>= 1) of `what`, the
+    field `unit_name` = `unit` (s)."""
     ratio = span / unit
     if not (abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1):
-        raise InputError(name, span, f"must be a whole number (>= 1) of {what} = {unit} s")
+        raise InputError(name, span, f"must be a whole number (>= 1) of {what} {unit_name} = "
+                         f"{unit} s", related=(unit_name,))
 
 
 @struct.dataclass
@@ -246,31 +257,6 @@ class EnvState:
     history: jnp.ndarray
     recovery_check: jnp.ndarray
     done: jnp.ndarray
-
-
-@struct.dataclass
-class PlanInputs:
-    """What `episode` gives a `Planner` besides the observation.
-
-    Attributes:
-      state: the episode's state before the action.  grid: the operating point's model.
-      params: the reward values.  step: () int32 agent step index; it comes from the
-        episode's scan, so it is not batched when episodes are vmapped (a `lax.cond` on it
-        stays a branch).
-    """
-
-    state: EnvState
-    grid: GridModel
-    params: EnvParams
-    step: jnp.ndarray
-
-
-class Planner:
-    """A controller that plans on the model (MPC): `episode` calls it as
-    planner(policy_params, obs, carry, inputs: PlanInputs) -> (action, carry)."""
-
-    def __call__(self, policy_params, obs, carry, inputs: PlanInputs):
-        raise NotImplementedError
 
 
 # --------------------------------------------------------------------------- #
@@ -312,8 +298,8 @@ def recovery_failed(vm, check, t_after_clearing, params: EnvParams):
 # --------------------------------------------------------------------------- #
 
 class LoadSheddingEnv:
-    """Structure (bus indices, step counts); `reset`/`step`/`episode`/`rollout` are pure and
-    take the grid model of the operating point as an argument.
+    """Structure (bus indices, step counts); `reset`/`step` are pure and take the grid model of
+    the operating point as an argument (episodes: `jaxgrid.episode`).
 
     `model` gives the structure only (bus numbering, load slots, precision): any operating
     point of the same grid does, and its arrays are not kept.
@@ -458,94 +444,3 @@ class LoadSheddingEnv:
         zero = jnp.zeros(len(self.action_slots), grid.load_p0.dtype)
         return jax.lax.fori_loop(0, steps, lambda _, s: self.step(s, zero, params, grid)[1],
                                  state)
-
-    def episode(self, policy_apply, policy_params, task: Task, params: EnvParams,
-                grid: GridModel, policy_carry=None, trace: bool = False):
-        """One whole episode (un-batched; `rollout` vmaps it over tasks).
-
-        policy_apply(policy_params, obs, carry) -> (action, carry); `policy_carry` is the
-        initial policy state (None for feed-forward policies). A `Planner` (e.g. the MPC)
-        is called with a fourth argument, `PlanInputs`. The policy state keeps the dtypes of
-        `policy_carry` (a saved float32 policy runs in a float64 study). After `done` the
-        reward stops and the policy state is held; without `trace` (and for policies, not
-        planners) the episode loop stops there (`episode_run`), so a batch of episodes
-        (vmapped) costs nothing more once all of them are done. Returns {"reward",
-        "shed_pu", "recovered", "steps" (agent steps taken), "diverged", "policy_carry"
-        (final)}; with `trace` (static) also per agent step "vm" (n_steps, n_observed) p.u.
-        and "shed_step_pu" (n_steps,), frozen after the episode ends.
-        """
-        loop = self.episode_start(task, params, grid, policy_carry)
-        if not (trace or isinstance(policy_apply, Planner)):
-            loop = self.episode_run(policy_apply, policy_params, params, grid, loop,
-                                    self.config.n_steps)
-            return self.episode_result(loop)
-        # a scan: per-step outputs, and an unbatched step index for the planner
-        step = self._episode_step(policy_apply, policy_params, params, grid, trace)
-        final, per_step = jax.lax.scan(step, loop[1], jnp.arange(self.config.n_steps))
-        out = self.episode_result((loop[0], final))
-        if trace:
-            out["vm"], out["shed_step_pu"] = per_step
-        return out
-
-    def episode_start(self, task: Task, params: EnvParams, grid: GridModel, policy_carry=None):
-        """The loop state of an episode before its first agent step: (k () int agent steps
-        taken, (obs, EnvState, policy carry, reward so far, p.u. shed so far, failed))."""
-        obs, state = self.reset(None, task, params, grid)
-        zero = jnp.zeros((), obs.dtype)
-        return jnp.zeros((), jnp.int32), (obs, state, policy_carry, zero, zero,
-                                          jnp.zeros((), bool))
-
-    def episode_run(self, policy_apply, policy_params, params: EnvParams, grid: GridModel,
-                    loop, until):
-        """The episode `loop` (`episode_start`) continued until agent step `until` (int) or
-        until it is done, in a `while_loop`; vmapped, until every episode of the batch is.
-        Splitting an episode into runs does not change it (`ars.pars` regroups the episodes
-        still running between two runs)."""
-        step = self._episode_step(policy_apply, policy_params, params, grid, False)
-        return jax.lax.while_loop(lambda lp: (lp[0] < until) & ~lp[1][1].done,
-                                  lambda lp: (lp[0] + 1, step(lp[1], lp[0])[0]), loop)
-
-    @staticmethod
-    def episode_done(loop):
-        """() bool: the episode of `loop` has ended."""
-        return loop[1][1].done
-
-    @staticmethod
-    def episode_result(loop) -> dict:
-        """`episode`'s dict (without the trace) from a finished episode loop."""
-        _, state, carry, total, shed, failed = loop[1]
-        return {"reward": total, "shed_pu": shed, "recovered": ~failed, "steps": state.step,
-                "diverged": state.health.diverged, "policy_carry": carry}
-
-    def _episode_step(self, policy_apply, policy_params, params: EnvParams, grid: GridModel,
-                      trace: bool):
-        """step(loop carry, k) -> (carry, per-step outputs or None): one agent step of the
-        policy's episode (held once done)."""
-        n_observed = len(self.observed)
-
-        def step(carry, k):
-            obs, state, policy_state, total, shed, failed = carry
-            live = ~state.done
-            inputs = (PlanInputs(state, grid, params, k),) if isinstance(policy_apply,
-                                                                        Planner) else ()
-            action, new_policy_state = policy_apply(policy_params, obs, policy_state, *inputs)
-            # the policy's state keeps its dtype (a float32 policy in a float64 simulation)
-            policy_state = jax.tree.map(lambda a, b: jnp.where(live, a, b).astype(b.dtype),
-                                        new_policy_state, policy_state)
-            obs, new, reward, _, info = self.step(state, action, params, grid)
-            new = jax.tree.map(lambda a, b: jnp.where(live, a, b), new, state)
-            total = total + jnp.where(live, reward, 0.0)
-            shed_now = jnp.where(live, info["shed_pu"], 0.0)
-            failed = failed | (live & info["terminated"])
-            per_step = (new.history[-1, :n_observed], shed_now) if trace else None
-            return (obs, new, policy_state, total, shed + shed_now, failed), per_step
-
-        return step
-
-    def rollout(self, policy_apply, policy_params, tasks: Task, params: EnvParams,
-                grid: GridModel, policy_carry=None, trace: bool = False):
-        """`episode` vmapped over a batch of tasks (leading axis) at one operating point
-        `grid`; the policy is shared. Every entry of the returned dict gains a leading axis.
-        """
-        return vmap_minor(lambda task: self.episode(policy_apply, policy_params, task, params,
-                                                    grid, policy_carry, trace))(tasks)

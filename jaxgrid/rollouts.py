@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrid import episode
 from jaxgrid.batching import batch_major, vmap_minor
 from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
 from jaxgrid.grid import GridModel
@@ -40,43 +41,43 @@ def at_point(models: GridModel, point) -> GridModel:
 
 @dataclasses.dataclass(frozen=True)
 class PointEpisode:
-    """`env.episode` at the task's operating point of stacked `models` (for `ars.pars`):
-    `episode(policy_apply, policy_params, task: PointTask, policy_carry, models) -> dict`,
-    or in two runs, `result(resume(..., begin(..., steps)))`, between which the trainer
-    regroups the episodes still running (`ars.pars.ParsConfig.compact_after`)."""
+    """`jaxgrid.episode.play` at the task's operating point of stacked `models` (for
+    `ars.pars`): `episode(policy_apply, policy_params, task: PointTask, policy_carry, models)
+    -> dict`, or in two runs, `result(resume(..., begin(..., steps)))`, between which the
+    trainer regroups the episodes still running (`ars.pars.ParsConfig.compact_after`)."""
 
     env: LoadSheddingEnv
     params: EnvParams
 
     def __call__(self, policy_apply, policy_params, task: PointTask, policy_carry, models):
-        return self.env.episode(policy_apply, policy_params, task.task, self.params,
-                                at_point(models, task.point), policy_carry)
+        return episode.play(self.env, policy_apply, policy_params, task.task, self.params,
+                            at_point(models, task.point), policy_carry)
 
     def begin(self, policy_apply, policy_params, task: PointTask, policy_carry, models,
-              steps: int):
+              steps: int) -> episode.EpisodeLoop:
         """The episode's loop after `steps` agent steps (or when done, if sooner)."""
         grid = at_point(models, task.point)
-        loop = self.env.episode_start(task.task, self.params, grid, policy_carry)
-        return self.env.episode_run(policy_apply, policy_params, self.params, grid, loop,
-                                    steps)
+        loop = episode.start(self.env, task.task, self.params, grid, policy_carry)
+        return episode.run(self.env, policy_apply, policy_params, self.params, grid, loop,
+                           steps)
 
-    def resume(self, policy_apply, policy_params, task: PointTask, models, loop):
+    def resume(self, policy_apply, policy_params, task: PointTask, models,
+               loop: episode.EpisodeLoop) -> episode.EpisodeLoop:
         """`loop` (from `begin`) run to the episode's end."""
-        return self.env.episode_run(policy_apply, policy_params, self.params,
-                                    at_point(models, task.point), loop,
-                                    self.env.config.n_steps)
+        return episode.run(self.env, policy_apply, policy_params, self.params,
+                           at_point(models, task.point), loop, self.env.config.n_steps)
 
-    done = staticmethod(LoadSheddingEnv.episode_done)
-    result = staticmethod(LoadSheddingEnv.episode_result)
+    done = staticmethod(episode.done)
+    result = staticmethod(episode.result)
 
 
 def rollout_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
                   policy_carry=None, trace: bool = False):
     """Every task of `specs` in one compiled call: a vmap over their operating points (models
-    batched) of `env.rollout` over each point's tasks (one model shared).
+    batched) of `jaxgrid.episode.rollout` over each point's tasks (one model shared).
 
     Every operating point of `specs` must have the same number of tasks (task sets do).
-    Returns (specs in the order of the results, `env.rollout`'s dict with a leading axis).
+    Returns (specs in the order of the results, `rollout`'s dict with a leading axis).
     """
     points = sorted({s.operating_point for s in specs})
     groups = [[s for s in specs if s.operating_point == p] for p in points]
@@ -95,12 +96,13 @@ def rollout_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_param
 
 @functools.lru_cache(maxsize=32)
 def _points_rollout(env: LoadSheddingEnv, policy_apply, trace: bool):
-    """jit of `env.rollout` vmapped over operating points (models and tasks batched), one
-    per (env, policy, trace), so repeated calls reuse the compilation."""
+    """jit of `jaxgrid.episode.rollout` vmapped over operating points (models and tasks
+    batched), one per (env, policy, trace), so repeated calls reuse the compilation."""
 
     def run(models, tasks, params, policy_params, policy_carry):
-        return jax.vmap(lambda grid, task: env.rollout(
-            policy_apply, policy_params, task, params, grid, policy_carry, trace))(models, tasks)
+        return jax.vmap(lambda grid, task: episode.rollout(
+            env, policy_apply, policy_params, task, params, grid, policy_carry, trace))(
+                models, tasks)
 
     return jax.jit(run)
 

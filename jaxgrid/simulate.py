@@ -22,8 +22,8 @@ from flax import struct
 from jaxgrid import network
 from jaxgrid.checks import Range
 from jaxgrid.batching import vmap_minor
-from jaxgrid.dynamics import (clip_to_limits, derivatives, exponential_heun, machine_state,
-                              motor_jacobian, rosenbrock_heun, solve_network,
+from jaxgrid.dynamics import (FAMILIES, clip_to_limits, derivatives, exponential_heun,
+                              machine_state, motor_jacobian, rosenbrock_heun, solve_network,
                               update_loads)
 from jaxgrid.grid import GridModel, GridState
 
@@ -266,8 +266,8 @@ def parameters_valid(model: GridModel):
     """
     ok = [jnp.all(jnp.isfinite(a)) for a in jax.tree.leaves(model)
           if jnp.issubdtype(jnp.asarray(a).dtype, jnp.inexact)]
-    for family in (model.machines, model.exciters, model.governors, model.loads):
-        for g in family:
+    for family in FAMILIES:
+        for g in getattr(model, family):
             for con in g.model.cons:
                 v = g.params[con.name]
                 ok.append(jnp.all((v >= con.lo) & (v <= con.hi) & ((v > 0) | (not con.positive))))

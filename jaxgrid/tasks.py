@@ -15,7 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 from flax import struct
 
-from jaxgrid.checks import InputError, Range, check_each
+from jaxgrid.checks import InputError, Range, check_each, check_listed
 from jaxgrid.grid import GridModel
 from jaxgrid.simulate import FaultEvent, Task, make_task, stack_tasks
 
@@ -67,24 +67,30 @@ class TaskSet:
     fault_x: float = 1e-4
 
     def __post_init__(self):
-        """InputError naming the field (and entry) of a value outside its range."""
-        for name in ("fault_buses", "fault_durations", "fault_starts"):
-            if not getattr(self, name):
-                raise InputError(name, None, " is empty")
+        """InputError naming the field (and entry) of a value outside its range, and of a
+        list that is empty or repeats an entry (a repeat would double its tasks' weight)."""
+        check_listed("fault_buses", self.fault_buses, "bus")
+        check_listed("fault_durations", self.fault_durations, "duration (0: no fault)")
+        check_listed("fault_starts", self.fault_starts, "start time")
         check_each("fault_durations", self.fault_durations, FAULT_TIME)
         check_each("fault_starts", self.fault_starts, FAULT_TIME)
+        if self.operating_points is not None:
+            check_listed("operating_points", self.operating_points, "operating point, or "
+                         "leave it out for all of them")
         FAULT_IMPEDANCE.check("fault_r", self.fault_r)
         FAULT_IMPEDANCE.check("fault_x", self.fault_x)
 
     def points(self, n_points: int) -> tuple[int, ...]:
-        """The operating-point indices of the set, checked against n_points."""
-        points = tuple(range(n_points)) if self.operating_points is None else \
-            self.operating_points
-        bad = [p for p in points if not 0 <= p < n_points]
-        if bad or not points:
-            raise ValueError(f"task set: operating points {list(points)}: the study has "
-                             f"{n_points} (indices 0 to {n_points - 1})")
-        return points
+        """The operating-point indices of the set; InputError "operating_points" for an index
+        the study's n_points do not have."""
+        if self.operating_points is None:
+            return tuple(range(n_points))
+        bad = [p for p in self.operating_points if not 0 <= p < n_points]
+        if bad:
+            raise InputError("operating_points", list(self.operating_points),
+                             f"the study has {n_points} operating point(s), indices 0 to "
+                             f"{n_points - 1}")
+        return self.operating_points
 
     def specs(self, n_points: int) -> list[TaskSpec]:
         """Every task, operating point outermost, then start, bus and duration."""

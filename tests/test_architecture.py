@@ -5,6 +5,13 @@
 - No command-line code in them (`def main`, `if __name__ == "__main__"`, argparse): commands
   live in `experiments/`.
 - `ars/` imports nothing from `jaxgrid/`.
+- The readers (`jaxgrid.io`) stand on the floor of what they build and return: the case
+  tables (`jaxgrid.case`), the DYR record types (`jaxgrid.records`) and the shared
+  input-check helpers (`jaxgrid.checks`), which themselves import nothing higher. Settings,
+  models, simulation and studies sit above them; a reader of study settings (the PNNL JSON)
+  belongs to `jaxgrid.study`.
+- Nothing `jaxgrid.models` imports, directly or through other modules, is a reader: the
+  models know the DYR record type, not the parser.
 """
 from __future__ import annotations
 
@@ -14,6 +21,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 LIBRARY = ("jaxgrid", "ars", "baselines")
+READER_FLOOR = ("jaxgrid.case", "jaxgrid.checks", "jaxgrid.records")
 
 
 def module_name(path: Path) -> str:
@@ -73,6 +81,42 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
     return None
 
 
+def in_package(module: str, package: str) -> bool:
+    """Whether `module` is `package` or one of its modules."""
+    return module == package or module.startswith(package + ".")
+
+
+def reachable(graph: dict[str, set[str]], starts) -> set[str]:
+    """The modules `starts` import directly or through others, `starts` included."""
+    seen, todo = set(), list(starts)
+    while todo:
+        if (module := todo.pop()) not in seen:
+            seen.add(module)
+            todo.extend(graph[module])
+    return seen
+
+
+def imports_out_of(graph: dict[str, set[str]], modules, allowed) -> list[str]:
+    """"A -> B" for each import B of a module A of `modules` that `allowed(B)` rejects."""
+    return sorted(f"{a} -> {b}" for a in modules for b in graph[a] if not allowed(b))
+
+
+def on_reader_floor(module: str) -> bool:
+    """A reader, or a module readers may import (see the module docstring)."""
+    return in_package(module, "jaxgrid.io") or module in READER_FLOOR
+
+
+def reader_breaks(graph: dict[str, set[str]]) -> list[str]:
+    """Imports that leave the reader floor, made by a reader or by a floor module."""
+    return imports_out_of(graph, [m for m in graph if on_reader_floor(m)], on_reader_floor)
+
+
+def model_breaks(graph: dict[str, set[str]]) -> list[str]:
+    """Imports of a reader by a module that `jaxgrid.models` reaches."""
+    models = reachable(graph, [m for m in graph if in_package(m, "jaxgrid.models")])
+    return imports_out_of(graph, models, lambda m: not in_package(m, "jaxgrid.io"))
+
+
 def command_line_code(tree: ast.Module) -> list[str]:
     """What makes a module a command: `def main`, `if __name__ == "__main__"`, argparse."""
     found = []
@@ -91,6 +135,14 @@ def command_line_code(tree: ast.Module) -> list[str]:
 def test_find_cycle_finds_a_circle_and_accepts_a_tree():
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b", "c"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_layer_rules_catch_the_old_io_knot():
+    old = {"jaxgrid.io.pnnl": {"jaxgrid.checks", "jaxgrid.env"}, "jaxgrid.checks": set(),
+           "jaxgrid.env": {"jaxgrid.models.base"}, "jaxgrid.models.base": {"jaxgrid.io.dyr"},
+           "jaxgrid.io.dyr": set()}
+    assert reader_breaks(old) == ["jaxgrid.io.pnnl -> jaxgrid.env"]
+    assert model_breaks(old) == ["jaxgrid.models.base -> jaxgrid.io.dyr"]
 
 
 def test_the_graph_sees_imports_inside_functions_and_from_package_imports():
@@ -116,3 +168,48 @@ def test_ars_imports_nothing_from_jaxgrid():
              for name, deps in graph.items() if name.split(".")[0] == "ars"}
     found = {name: deps for name, deps in found.items() if deps}
     assert not found, f"ars/ must not know grids: {found}"
+
+
+def test_readers_import_only_the_case_and_record_types():
+    found = reader_breaks(import_graph())
+    assert not found, ("jaxgrid.io may import only jaxgrid.io, " + ", ".join(READER_FLOOR)
+                       + "; found: " + "; ".join(found))
+
+
+def test_models_do_not_import_the_readers():
+    found = model_breaks(import_graph())
+    assert not found, "jaxgrid.models must not import jaxgrid.io; found: " + "; ".join(found)
+
+
+COMMANDS_TOP_LEVEL = 12  # files at experiments/'s top: the commands a user runs first
+
+
+def experiment_modules() -> dict[str, ast.Module]:
+    """Every module under experiments/: name -> parsed source."""
+    return {module_name(p): ast.parse(p.read_text(), str(p))
+            for p in sorted((ROOT / "experiments").rglob("*.py"))}
+
+
+def is_command(tree: ast.Module) -> bool:
+    """A command module: it has `def main` or `if __name__ == "__main__"` (argparse alone,
+    as in the flags the commands share, does not make one)."""
+    return any(not found.startswith("import argparse") for found in command_line_code(tree))
+
+
+def test_no_module_imports_a_command():
+    """What two commands share lives in a module that is not a command (experiments/common,
+    the *_files and profiling helpers), so a command's flags and output stay its own. A
+    package's __main__.py is the entry of its command and may import it."""
+    modules = experiment_modules()
+    commands = {name for name, tree in modules.items() if is_command(tree)}
+    known = set(modules)
+    found = {name: sorted(imported_modules(name, tree, known) & commands)
+             for name, tree in modules.items() if not name.endswith("__main__")}
+    found = {name: deps for name, deps in found.items() if deps}
+    assert not found, f"modules importing a command module: {found}"
+    assert {"experiments.train", "experiments.evaluate"} <= commands
+
+
+def test_the_top_of_experiments_holds_the_commands_a_user_runs_first():
+    top = sorted(p.name for p in (ROOT / "experiments").glob("*.py"))
+    assert len(top) <= COMMANDS_TOP_LEVEL, f"experiments/ top level: {top}"

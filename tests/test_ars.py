@@ -20,7 +20,7 @@ TARGETS = jnp.array([[-0.05, -0.15], [-0.10, -0.02], [-0.18, -0.08], [-0.12, -0.
 def quadratic_episode(apply, params, task, carry, scale=1.0):
     """One step: observe the task's target (2,), act, earn −100·scale·|action − target|²
     (`scale`: the iteration's data)."""
-    action, carry = apply(params, task, carry)
+    action, carry = apply(params, task, carry, None)
     return {"reward": -100.0 * scale * jnp.sum((action - task) ** 2), "policy_carry": carry}
 
 

@@ -20,7 +20,7 @@ from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.powerflow import solve
 from jaxgrid.simulate import FaultEvent, LoadChange, make_task, simulate_batch, stack_tasks
 
-from experiments.plot_fidvr import draw, motor_shares
+from experiments.diagnostics.plot_fidvr import draw, motor_shares
 
 NAMES = ("ieee39_fidvr", "ieee300_fidvr")
 # name: (observed, action, motor bus counts, recovery level p.u., severe fault, mild fault);

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from conftest import SHARED_CASES, andes_cases_dir
-from jaxgrid.io.dyr import DyrData, DyrError, DyrWarning, read_dyr
+from jaxgrid.io.dyr import DyrError, DyrWarning, read_dyr
+from jaxgrid.records import DyrData
 
 CASES = SHARED_CASES
 

@@ -1,10 +1,13 @@
-"""The load-shedding environment: each reward term by hand, then whole steps and episodes.
+"""The load-shedding environment: each reward term by hand, then whole steps and episodes
+(`jaxgrid.episode`).
 
 Episodes run on the built-in ieee39_fidvr study, shortened to 6 s (the fault at 1 s and the
 4 s recovery check still fit), with one compiled rollout shared by the tests. The grid model
 is an argument of every call.
 """
 from __future__ import annotations
+
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -13,6 +16,7 @@ import pytest
 
 from jaxgrid.env import (EnvParams, envelope_deviation, invalid_requests, prefault_requests,
                          recovery_failed, shed_power)
+from jaxgrid.episode import rollout
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 from jaxgrid.study import builtin
 
@@ -125,18 +129,18 @@ def test_observations_every_obs_interval_end_with_the_agent_step_s_own(study, gr
         study.env(obs_interval=0.03)
 
 
-def zero_policy(params, obs, carry):
+def zero_policy(params, obs, carry, inputs):
     return jnp.zeros(3), carry
 
 
-def shed_after_fault(params, obs, carry):
+def shed_after_fault(params, obs, carry, inputs):
     """Shed 20 % at every action bus on the first step after 1.1 s, once (carry: step count)."""
     return jnp.where(carry == 11, -0.2, 0.0) * jnp.ones(3), carry + 1
 
 
 @pytest.fixture(scope="module")
 def episodes(env, grid, tasks):
-    run = jax.jit(env.rollout, static_argnums=0)
+    run = jax.jit(functools.partial(rollout, env), static_argnums=0)
     batch = stack_tasks(tasks)
     return {name: run(policy, None, batch, EnvParams(), grid, jnp.zeros((3,), jnp.int32))
             for name, policy in (("none", zero_policy), ("shed", shed_after_fault))}, run
@@ -184,7 +188,8 @@ def test_recovery_buses_and_action_status_switches(study, grid):
     obs, state = env.reset(None, make_task(grid, None), EnvParams(), grid)
     assert obs.shape == (8,) and env.obs_size == 8
     assert np.asarray(state.recovery_check).tolist() == [True, True] + [False] * 6
-    with pytest.raises(ValueError, match=r"recovery_buses \[99\] are not observed buses"):
+    with pytest.raises(ValueError, match=r"recovery_buses = \[99\]: buses \[99\] are not "
+                                         "observed buses"):
         study.env(recovery_buses=(99,))
 
 
@@ -208,15 +213,29 @@ def test_a_diverging_episode_is_flagged_within_one_agent_step(episodes, grid, ta
     assert float(out["reward"][0]) == float(batched["none"]["reward"][1])
 
 
-def test_the_stopping_loop_equals_the_full_scan(episodes, env, grid, tasks):
-    """Without `trace` the episode loop stops once every episode of the batch is done; with
-    it, the scan runs all steps. The results are the same (to float32 rounding: the two loops
-    are compiled apart; here they agree bitwise)."""
+class ShedAtStep:
+    """A planner-style controller (`plans`: its episodes run in a scan) that sheds 20 % at
+    every action bus at agent step 11, read from `inputs` (the step index and the state
+    before the action), not from its carry (a step count, as `shed_after_fault`'s)."""
+
+    plans = True
+
+    def __call__(self, params, obs, carry, inputs):
+        now = (inputs.step == 11) & (inputs.state.step == inputs.step)
+        return jnp.where(now, -0.2, 0.0) * jnp.ones(3), carry + 1
+
+
+def test_a_policy_s_stopping_loop_equals_a_planner_s_full_scan(episodes, env, grid, tasks):
+    """Without `trace` a policy's episode loop stops once every episode of the batch is done;
+    with it, or for a planner, the scan runs all steps. Both are called controller(params,
+    obs, carry, inputs): the planner, reading `inputs`, gives the episodes of the policy,
+    which ignores them. The results are the same (to float32 rounding: the two loops are
+    compiled apart; here they agree bitwise)."""
     batched, _ = episodes
-    traced = jax.jit(env.rollout, static_argnums=(0, 6))(
-        shed_after_fault, None, stack_tasks(tasks), EnvParams(), grid,
+    traced = jax.jit(functools.partial(rollout, env), static_argnums=(0, 6))(
+        ShedAtStep(), None, stack_tasks(tasks), EnvParams(), grid,
         jnp.zeros((3,), jnp.int32), True)
-    for key in ("steps", "recovered"):
+    for key in ("steps", "recovered", "policy_carry"):
         np.testing.assert_array_equal(np.asarray(traced[key]), np.asarray(batched["shed"][key]))
     for key in ("reward", "shed_pu"):
         np.testing.assert_allclose(np.asarray(traced[key]), np.asarray(batched["shed"][key]),
@@ -263,10 +282,10 @@ def test_coarse_step_values_are_checked(env, changes, message):
 def test_coarse_step_keeps_the_verdicts_and_rewards(episodes, study, grid, tasks):
     """The same three episodes with 10-ms steps outside the fault window: the same recovery
     verdicts, and rewards within 2 % (the envelope deviation of the FIDVR episode sums
-    voltage errors of a few 1e-3 p.u., `experiments.step_accuracy`)."""
+    voltage errors of a few 1e-3 p.u., `experiments.diagnostics.step_accuracy`)."""
     fine = episodes[0]["shed"]
     env = study.env(episode=6.0, coarse_dt=0.01, fine_window=1.0)
-    coarse = jax.jit(env.rollout, static_argnums=0)(
+    coarse = jax.jit(functools.partial(rollout, env), static_argnums=0)(
         shed_after_fault, None, stack_tasks(tasks), EnvParams(), grid,
         jnp.zeros((3,), jnp.int32))
     print("\nrewards, fine and coarse:", np.asarray(fine["reward"]).round(2),
@@ -287,7 +306,7 @@ def test_a_float32_policy_state_runs_in_a_float64_study(study):
     env = study64.env(episode=0.3)
     n_action = len(env.action_slots)
 
-    def apply(params, obs, carry):  # counts the observations' sum in its state
+    def apply(params, obs, carry, inputs):  # counts the observations' sum in its state
         return jnp.zeros(n_action, obs.dtype), carry + jnp.sum(obs)
 
     _, out = rollout_specs(study64, env, apply, None, [TaskSpec(4, 0.0)],

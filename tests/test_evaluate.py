@@ -5,7 +5,8 @@ import json
 
 import pytest
 
-from experiments.evaluate import evaluate, main
+from experiments.common.evaluation import evaluate
+from experiments.evaluate import main
 from jaxgrid.study import builtin
 
 

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from conftest import SHARED_CASES, andes_cases_dir
-from jaxgrid.io.dyr import DyrRecord, read_dyr
+from jaxgrid.io.dyr import read_dyr
 from jaxgrid.models.base import ModelError
 from jaxgrid.models.exciters import EXCITERS, ExciterPorts, ExciterStart
+from jaxgrid.records import DyrRecord
 
 # init and dynamics evaluate the same float64 expressions; what remains is round-off on
 # derivatives of order KA·u/TA ~ 1e3 p.u./s.

@@ -1,10 +1,12 @@
 """Property-based fuzzing of every reader and study value (Hypothesis, derandomized).
 
-Each input kind of `experiments.fuzz_inputs` (the PNNL 39-bus RAW v30 and v33, its DYR, task
-and simulation JSON, a study TOML) is mutated JAXGRID_FUZZ_EXAMPLES times (default 60; the
-study TOML gets a tenth, as each valid mutant compiles). Property: every mutant gives a clear
-error that names its file, or a result with only finite values; never a bare exception,
-never silent garbage. `python -m experiments.fuzz_inputs --examples N` runs a longer profile.
+Each input kind of `experiments.diagnostics.fuzz_inputs` (the PNNL 39-bus RAW v30 and v33, its
+DYR, task and simulation JSON, two study TOMLs) is mutated JAXGRID_FUZZ_EXAMPLES times
+(default 60; a third for the kinds whose mutants build a study). Property: every mutant gives a clear error
+that names its file (a study file: and its table), or a result with only finite values, no
+repeated or empty list setting and no ignored setting; never a bare exception, never silent
+garbage, never a hang. `python -m experiments.diagnostics.fuzz_inputs --examples N --seed S` runs a
+campaign.
 """
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import os
 
 import pytest
 
-from experiments.fuzz_inputs import examples_for, kinds, run_kind
+from experiments.diagnostics.fuzz_inputs import examples_for, kinds, run_kind
 
 EXAMPLES = int(os.environ.get("JAXGRID_FUZZ_EXAMPLES", "60"))
 

@@ -1,11 +1,12 @@
 """The Gymnasium adapter: registration, Gymnasium's own env checker, and one episode against
-the functional environment's `rollout`.
+the functional environment's `jaxgrid.episode.rollout`.
 
 The 39-bus env runs 6 s episodes (the fault at 1 s and the 4 s recovery check still fit) and is
 built once for the module; the 300-bus env is only made, reset and stepped once.
 """
 from __future__ import annotations
 
+import functools
 import warnings
 
 import gymnasium
@@ -16,6 +17,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from jaxgrid.env import EnvParams
+from jaxgrid.episode import rollout
 from jaxgrid.gym import ENV_IDS, LoadSheddingGymEnv  # registers the ids
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 from jaxgrid.study import builtin
@@ -99,13 +101,13 @@ def test_zero_action_fidvr_episode_terminates_like_rollout(env39):
     assert steps < env39.env.config.n_steps == 60, "failure ends the episode early"
     assert 5.0 < info["time"] < 6.0, "judged after the 4 s recovery time past clearing at 1.08 s"
 
-    def zero_policy(params, obs, carry):
+    def zero_policy(params, obs, carry, inputs):
         return jnp.zeros(3), carry
 
     grid = env39.study.point(0)
     batch = stack_tasks([make_task(grid, FIDVR_FAULT)])
-    out = jax.jit(env39.env.rollout, static_argnums=0)(zero_policy, None, batch, EnvParams(),
-                                                        grid)
+    out = jax.jit(functools.partial(rollout, env39.env), static_argnums=0)(
+        zero_policy, None, batch, EnvParams(), grid)
     assert int(out["steps"][0]) == steps and not bool(out["recovered"][0])
     assert total == pytest.approx(float(out["reward"][0]), rel=REWARD_RTOL)
 

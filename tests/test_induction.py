@@ -528,7 +528,7 @@ def test_flat_run_with_motor_loads(tmp_path):
     """Kundur's two loads as a double-cage CIM5BL and a single-cage CIM6BL: a 2 s run with
     no event stays at the power flow (float32 time loop)."""
     from conftest import andes_cases_dir
-    from experiments.andes_reference import write_psse_dyr
+    from experiments.reference.andes_files import write_psse_dyr
     from jaxgrid.compile import compile_model
     from jaxgrid.io.raw import read_raw
     from jaxgrid.powerflow import PowerFlowOptions, solve

@@ -401,6 +401,9 @@ TRANSFORMER_2_30 = r"\s*2,\s*30,\s*0,'1 '"
                                         r"QB = -9999 Mvar"),
     ((r"\s*30,'1',", 0, 6, "0.0"), r"generator at bus 30 id '1': VS = 0.0: must lie in "
                                    r"\(0, 2\) p.u."),
+    # a section end marker made a record of a section that is skipped: its counts are fields
+    ((r" 0 /End of Multi-terminal dc", 0, 0, "0.0"), r"multi-terminal dc record: NCONV = "
+                                                    r"'Begin' is not a number"),
 ])
 def test_implausible_raw_values(tmp_path, edit, message):
     """Values that used to raise a bare ZeroDivisionError/OverflowError, or were accepted and

@@ -8,9 +8,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrid.io.dyr import DyrRecord, read_dyr
+from jaxgrid.io.dyr import read_dyr
 from jaxgrid.models.base import ModelError, quadratic_saturation, quadratic_saturation_constants
 from jaxgrid.models.machines import MACHINES, MachinePorts, MachineStart
+from jaxgrid.records import DyrRecord
 from tests.conftest import SHARED_CASES, andes_cases_dir
 
 V0 = 1.02 * np.exp(0.2j)   # terminal voltage, p.u.
@@ -25,7 +26,7 @@ def _records(path, model):
 
 @pytest.fixture(scope="module")
 def machine_records(tmp_path_factory):
-    from experiments.andes_reference import write_psse_dyr
+    from experiments.reference.andes_files import write_psse_dyr
     ieee14 = write_psse_dyr(str(andes_cases_dir() / "ieee14/ieee14.dyr"),
                             str(tmp_path_factory.mktemp("m") / "ieee14.dyr"))
     gensal = _records(SHARED_CASES / "ieee39/IEEE39bus_3AC_exdc1_gridpack.dyr", "GENSAL")

@@ -209,3 +209,24 @@ def test_evaluate_runs_the_saved_policy_and_names_a_layout_mismatch(straight, tm
     assert evaluate.main(["--study", str(other), "--controller", f"policy:{straight / 'policy'}",
                           "--out", str(tmp_path / "x.json")]) == 2
     assert "use ppo:PATH" in capsys.readouterr().err
+
+
+def test_the_saved_policy_acts_with_the_mean_of_rejax_gaussian():
+    """GaussianMeanPolicy has rejax's GaussianPolicy parameters; its `mean` is the action
+    rejax's own `act` samples once the spread is ~0."""
+    from rejax.networks import GaussianPolicy
+
+    from baselines.ppo import PolicyInfo
+
+    info = PolicyInfo(obs_size=5, action_dim=3, hidden=(8,), activation="tanh",
+                      action_low=-0.2, action_high=0.0, normalize_actions=True)
+    actor, obs = info.actor(), jax.random.normal(jax.random.PRNGKey(1), (4, 5))
+    params = actor.init(jax.random.PRNGKey(0), obs, jax.random.PRNGKey(2))
+    rejax = GaussianPolicy(3, (-1.0, 1.0), (8,), jax.nn.tanh)
+    assert jax.tree.structure(params) == jax.tree.structure(
+        rejax.init(jax.random.PRNGKey(0), obs, jax.random.PRNGKey(2)))
+    still = jax.tree_util.tree_map_with_path(
+        lambda path, x: jnp.full_like(x, -60.0) if "action_log_std" in str(path) else x, params)
+    sampled = rejax.apply(still, obs, jax.random.PRNGKey(3), method="act")
+    np.testing.assert_allclose(actor.apply(still, obs, method="mean").clip(-1.0, 1.0), sampled,
+                               atol=1e-6)

@@ -31,7 +31,7 @@ from baselines.rlgc import (LOG_TASKS, RlgcNetwork, networks_of_size, read_polic
 from baselines.rlgc_layouts import IEEE39, IEEE300
 from jaxgrid.env import EnvConfig
 from jaxgrid.io.dyr import read_dyr
-from jaxgrid.io.pnnl import read_task_config
+from jaxgrid.study.pnnl import read_task_config
 from jaxgrid.io.raw import read_raw
 from jaxgrid.study import bus_number
 from jaxgrid.study.names import bus_table
@@ -106,7 +106,7 @@ def run_both(path, config: EnvConfig, steps: int, seed: int = 0):
     carry, ours, inputs = policy.network.initial_carry(), [], []
     for frame in frames:
         stack = np.concatenate([stack[1:], frame[None]])
-        action, carry = apply(params, stack.reshape(-1), carry)
+        action, carry = apply(params, stack.reshape(-1), carry, None)
         ours.append(np.asarray(action))
         voltage = dict(zip(config.observed_buses, stack[:, :n_v].T))
         fraction = dict(zip(config.action_buses, stack[:, n_v:].T))
@@ -205,7 +205,7 @@ def test_the_controller_registry_reads_rlgc_files():
     policy, params, info = saved_policy(spec)
     assert info == {"history": 1}
     apply, _, carry = controller(spec, fake_env(STUDY_39), (policy, params, info))
-    action, carry = apply(params, np.full(11, 0.95, np.float32), carry)
+    action, carry = apply(params, np.full(11, 0.95, np.float32), carry, None)
     assert action.shape == (3,) and ((-0.2 <= action) & (action <= 0.0)).all()
     assert carry[0].shape == (32,)
 

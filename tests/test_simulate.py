@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments.andes_reference import run_andes, trajectory_errors, write_psse_dyr
+from experiments.reference.andes_files import run_andes, trajectory_errors, write_psse_dyr
 from experiments.simulate import main
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import read_dyr

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from experiments.step_accuracy import ACCURACY_AT_CHECK, ACCURACY_P99, accuracy, accurate
+from experiments.diagnostics.step_accuracy import (ACCURACY_AT_CHECK, ACCURACY_P99, accuracy,
+                                                   accurate)
 from jaxgrid.study import builtin
 
 

@@ -42,7 +42,7 @@ def test_phi_functions_match_the_exponential():
 @pytest.fixture(scope="module")
 def kundur_with_motor(tmp_path_factory):
     from conftest import andes_cases_dir
-    from experiments.andes_reference import write_psse_dyr
+    from experiments.reference.andes_files import write_psse_dyr
     from jaxgrid.compile import CompileOptions, compile_model
     from jaxgrid.io.dyr import read_dyr
     from jaxgrid.io.raw import read_raw

@@ -8,6 +8,7 @@ episodes (the fault at 1 s, no recovery judgement needed for these checks).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 from pathlib import Path
 
@@ -17,6 +18,7 @@ import pytest
 
 from baselines.controllers import no_control
 from jaxgrid.env import EnvParams
+from jaxgrid.episode import rollout
 from jaxgrid.io.raw import read_raw
 from jaxgrid.rollouts import at_point, rollout_specs, stratified_sampler
 from jaxgrid.study import CompileSettings, builtin, from_files, read_study, write_study
@@ -76,7 +78,7 @@ def uncontrolled(pnnl39):
     apply, params, carry = no_control(env)
     specs = TaskSet((4, 15), (0.05, 0.08)).specs(study.n_points)
     ordered, batch = rollout_specs(study, env, apply, params, specs, carry)
-    run = jax.jit(env.rollout, static_argnums=0)
+    run = jax.jit(functools.partial(rollout, env), static_argnums=0)
     per_point = []
     for k in range(study.n_points):
         mine = [s for s in ordered if s.operating_point == k]
@@ -243,7 +245,7 @@ def test_bad_study_files_name_the_key_and_value(tmp_path, toml, message):
 
 def test_policy_of_another_layout_is_refused_by_name(tmp_path):
     """A saved policy knows its layout; evaluating it on a study with other buses names both."""
-    from experiments.evaluate import evaluate
+    from experiments.common.evaluation import evaluate
 
     folder = tmp_path / "policy"
     folder.mkdir()
@@ -372,10 +374,21 @@ def test_bad_builtin_grid_is_named(tmp_path, grid, message):
     ("envStepTimeInSec", 0, r"envStepTimeInSec = 0: must lie in \(0, 60\] s"),
     ("actionScopeAry", ["Bus504", "Bus507", "Bus504"], r"actionScopeAry = .*: Bus504 is listed "
                                                         "more than once"),
+    # every list: no entry repeated (names compared without case), none empty
+    ("faultBusCandidates", ["Bus4", "bus4"], r"faultBusCandidates = \['Bus4', 'bus4'\]: bus4 is "
+                                             "listed more than once"),
+    ("faultStartTimeCandidates", [0.05, 0.05], r"faultStartTimeCandidates = \[0.05, 0.05\]: "
+                                               "0.05 is listed"),
+    ("faultDurationCandidates", [0.0, 0.05, 0.0], r"faultDurationCandidates = .*: 0.0 is listed"),
+    ("observationScopeAry", ["Bus4", "BUS4"], r"observationScopeAry = .*: BUS4 is listed"),
+    ("faultBusCandidates", [], r"faultBusCandidates = \[\]: must be a non-empty list"),
+    ("faultDurationCandidates", [], r"faultDurationCandidates = \[\]: must be a non-empty list"),
+    ("actionValueRanges", [], r"actionValueRanges = \[\]: must be a list of \[low, high\]"),
 ])
 def test_task_json_values_are_range_checked(shared_cases, tmp_path, key, value, message):
-    """Out-of-range PNNL task values are named by file and key at reading."""
-    from jaxgrid.io.pnnl import read_task_config
+    """Out-of-range PNNL task values, and lists that repeat an entry or are empty, are named
+    by file and key at reading."""
+    from jaxgrid.study.pnnl import read_task_config
 
     data = json.loads((shared_cases / TASK).read_text())
     path = tmp_path / "task.json"
@@ -391,7 +404,7 @@ def test_task_json_values_are_range_checked(shared_cases, tmp_path, key, value, 
                                                            r"lie in \[0, 1e\+06\] p.u."),
 ])
 def test_sim_json_values_are_range_checked(shared_cases, tmp_path, change, message):
-    from jaxgrid.io.pnnl import read_sim_config
+    from jaxgrid.study.pnnl import read_sim_config
 
     data = json.loads((shared_cases / SIM).read_text())
     path = tmp_path / "sim.json"
@@ -469,13 +482,14 @@ def test_committed_policy_runs_on_the_study_file_at_another_load_level(shared_ca
     policy:results/pnnl39/policy`: the paper's settings (action range, LSTM history 1) at a
     load level; the generalisation set, which indexed the 12 load levels, and the test set
     both run at the one point, and the committed policy's layout is this study's."""
-    from experiments.evaluate import controlled_env
+    from experiments.common.evaluation import controlled_env
 
     study = read_study(REPO / "studies" / "ieee39_pnnl.toml", raw=[shared_cases / POINTS[1]])
     assert (study.params.action_low, study.history("lstm")) == (-0.2, 1)
     assert len(study.tasks("test")) == 120 and len(study.tasks("generalisation")) == 120
     env, apply, params, carry = controlled_env(study, f"policy:{REPO / 'results/pnnl39/policy'}")
-    action, _ = apply(params, np.ones(env.config.history * env.obs_size, np.float32), carry)
+    action, _ = apply(params, np.ones(env.config.history * env.obs_size, np.float32), carry,
+                      None)
     assert env.config.history == 1 and action.shape == (len(env.action_slots),)
     assert np.all((action >= study.params.action_low) & (action <= study.params.action_high))
 
@@ -489,7 +503,7 @@ def test_committed_policy_runs_on_the_study_file_at_another_load_level(shared_ca
 def test_study_with_raw_files_names_the_flags_it_cannot_take(flags, message):
     import argparse
 
-    from experiments.studyargs import add_study_arguments, study_from_args
+    from experiments.common.studyargs import add_study_arguments, study_from_args
 
     parser = argparse.ArgumentParser()
     add_study_arguments(parser, None)

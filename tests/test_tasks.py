@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from jaxgrid.io.pnnl import read_sim_config, read_task_config
+from jaxgrid.study.pnnl import read_sim_config, read_task_config
 from jaxgrid.tasks import TaskSet, TaskSpec
 
 PNNL_TASK_FILES = [  # every task JSON under ../shared/cases
@@ -37,7 +37,7 @@ def test_task_set_is_the_product_grid_point_outermost():
     assert specs[0] == TaskSpec(4, 0.0, 0.5, 0) and specs[-1] == TaskSpec(15, 0.08, 1.0, 2)
     assert [s.operating_point for s in TaskSet((4,), (0.1,), operating_points=(2, 0))
             .specs(3)] == [2, 0]
-    with pytest.raises(ValueError, match=r"operating points \[3\]: the study has 3"):
+    with pytest.raises(ValueError, match=r"operating_points = \[3\]: the study has 3 "):
         TaskSet((4,), (0.1,), operating_points=(3,)).specs(3)
     with pytest.raises(ValueError, match="fault_buses is empty"):
         TaskSet((), (0.1,))

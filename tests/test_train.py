@@ -18,11 +18,9 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from experiments.evaluate import evaluate
-from experiments.train import PRESETS, main
+from experiments.common.evaluation import evaluate
+from experiments.common.pars_command import run
 from jaxgrid.study import builtin, read_study
-
-DEFAULTS = PRESETS["train_39bus"]
 
 TINY = ["--policy", "linear", "--history", "1", "--directions", "1", "--top", "1",
         "--tasks-per-iteration", "1", "--episode", "0.5", "--checkpoint-every", "3",
@@ -36,7 +34,7 @@ def _lines(path):
 @pytest.fixture(scope="module")
 def straight(tmp_path_factory):
     out = tmp_path_factory.mktemp("straight")
-    assert main(TINY + ["--iterations", "12", "--out", str(out)], DEFAULTS) == 0
+    assert run(TINY + ["--iterations", "12", "--out", str(out)], "train_39bus") == 0
     return out
 
 
@@ -45,7 +43,7 @@ def straight(tmp_path_factory):
 HANG_BEFORE_ITERATION_8 = """
 import sys, time
 import ars.train
-import experiments.train as train
+import experiments.common.pars_command as command
 make_trainer = ars.train.make_trainer
 def hanging_trainer(*args, **kwargs):
     trainer = make_trainer(*args, **kwargs)
@@ -55,7 +53,7 @@ def hanging_trainer(*args, **kwargs):
         return trainer.iteration(state, tasks, data)
     return trainer._replace(iteration=hang_after_7)
 ars.train.make_trainer = hanging_trainer
-sys.exit(train.main(sys.argv[1:], train.PRESETS["train_39bus"]))
+sys.exit(command.run(sys.argv[1:], "train_39bus"))
 """
 
 
@@ -74,7 +72,7 @@ def test_sigkill_mid_training_resumes_and_matches_an_uninterrupted_run(tmp_path,
     assert len(_lines(metrics)) == 7, "the run did not get going"
     kept = [int(p.name) for p in (out / "checkpoints").iterdir() if p.name.isdigit()]
     assert max(kept) == 6, f"killed after 7 iterations, last checkpoint {max(kept)}"
-    assert main(TINY + ["--iterations", "12", "--resume", "--out", str(out)], DEFAULTS) == 0
+    assert run(TINY + ["--iterations", "12", "--resume", "--out", str(out)], "train_39bus") == 0
     rows = [json.loads(line) for line in _lines(metrics)]
     assert [r["iteration"] for r in rows] == list(range(1, 13)), "one line per iteration"
     assert max(int(p.name) for p in (out / "checkpoints").iterdir() if p.name.isdigit()) == 12
@@ -127,16 +125,16 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
     assert kept == ["00003", "00006", "00009", "00012"], "a policy at every checkpoint"
     last, final = (np.load(straight / d / "policy.npz") for d in ("policies/00012", "policy"))
     np.testing.assert_array_equal(last["theta"], final["theta"])
-    assert main(TINY + ["--resume", "--out", str(tmp_path)], DEFAULTS) == 2
+    assert run(TINY + ["--resume", "--out", str(tmp_path)], "train_39bus") == 2
     assert "no checkpoint" in capsys.readouterr().err
-    assert main(TINY + ["--resume", "--iterations", "6", "--out", str(straight)], DEFAULTS) == 2
+    assert run(TINY + ["--resume", "--iterations", "6", "--out", str(straight)], "train_39bus") == 2
     assert "past --iterations 6" in capsys.readouterr().err
-    assert main(TINY + ["--resume", "--obs-clip", "5", "--out", str(straight)], DEFAULTS) == 2
+    assert run(TINY + ["--resume", "--obs-clip", "5", "--out", str(straight)], "train_39bus") == 2
     assert "has --obs-clip None, not 5.0" in capsys.readouterr().err
-    assert main(TINY + ["--obs-clip", "0", "--out", str(tmp_path)], DEFAULTS) == 2
+    assert run(TINY + ["--obs-clip", "0", "--out", str(tmp_path)], "train_39bus") == 2
     assert "--obs-clip 0.0: allowed > 0" in capsys.readouterr().err
     before = (straight / "metrics.jsonl").read_text()
-    assert main(TINY + ["--out", str(straight)], DEFAULTS) == 2
+    assert run(TINY + ["--out", str(straight)], "train_39bus") == 2
     assert "pass --resume" in capsys.readouterr().err
     assert (straight / "metrics.jsonl").read_text() == before, "a fresh run loses nothing"
 
@@ -154,10 +152,11 @@ def test_the_300_bus_gridpack_files_train_from_their_own_files(shared_cases, tmp
             "--hidden", "8,8", "--directions", "2", "--top", "1", "--tasks-per-iteration", "2",
             "--task-sampling", "stratified", "--episode", "0.3", "--checkpoint-every", "2",
             "--out", str(tmp_path)]
-    assert main(args + ["--iterations", "2"]) == 0
-    assert main(["--resume", "--iterations", "3", "--hidden", "8,8", "--directions", "2",
+    assert run(args + ["--iterations", "2"], "train") == 0
+    assert run(["--resume", "--iterations", "3", "--hidden", "8,8", "--directions", "2",
                  "--top", "1", "--tasks-per-iteration", "2", "--task-sampling", "stratified",
-                 "--episode", "0.3", "--checkpoint-every", "2", "--out", str(tmp_path)]) == 0
+                 "--episode", "0.3", "--checkpoint-every", "2", "--out", str(tmp_path)],
+               "train") == 0
     rows = [json.loads(line) for line in _lines(tmp_path / "metrics.jsonl")]
     assert [r["rollouts"] for r in rows] == [8, 16, 24]
     assert all(np.isfinite(r["reward_mean"]) for r in rows)
@@ -172,19 +171,19 @@ def test_tasks_per_iteration_fits_the_set_or_names_the_flag():
     --tasks-per-iteration."""
     from types import SimpleNamespace
 
-    from experiments.train import tasks_per_iteration
+    from experiments.common.training import Choices, tasks_per_iteration
 
     study = SimpleNamespace(name="two_raws", tasks=lambda name: [None] * 6)
 
     def args(m=None, sampling="uniform"):
-        return SimpleNamespace(tasks_per_iteration=m, task_set="train", task_sampling=sampling)
+        return Choices(tasks_per_iteration=m, task_set="train", task_sampling=sampling)
 
-    assert tasks_per_iteration(args(), study) == 6
-    assert tasks_per_iteration(args(4), study) == 4
+    assert tasks_per_iteration(study, args()) == 6
+    assert tasks_per_iteration(study, args(4)) == 4
     with pytest.raises(ValueError, match=r"--tasks-per-iteration 9: the task set 'train' of "
                                          r"study 'two_raws' has 6 tasks; pass "
                                          r"--tasks-per-iteration 6 or fewer"):
-        tasks_per_iteration(args(9), study)
+        tasks_per_iteration(study, args(9))
 
 
 def test_task_batch_auto_is_every_task_on_a_gpu_and_the_preset_elsewhere(monkeypatch, capsys):
@@ -193,16 +192,18 @@ def test_task_batch_auto_is_every_task_on_a_gpu_and_the_preset_elsewhere(monkeyp
     anything else names the flag."""
     import jax
 
-    from experiments.train import parser, task_batch
+    from experiments.common.pars_command import parser
+    from experiments.common.training import PAPER_PRESETS, task_batch
 
-    args = parser(PRESETS["train_300bus"]).parse_args([])
-    assert args.task_batch == "auto" and task_batch(args.task_batch, args.preset_task_batch) == 1
+    args = parser("train_300bus").parse_args([])
+    assert args.task_batch == "auto"
+    assert task_batch(args.task_batch, PAPER_PRESETS["large"]["task_batch"]) == 1
     assert task_batch(3, 1) == 3
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     assert task_batch("auto", 1) is None
     assert task_batch(3, 1) == 3
     with pytest.raises(SystemExit):
-        parser(PRESETS["train"]).parse_args(["--task-batch", "some"])
+        parser("train").parse_args(["--task-batch", "some"])
     assert "--task-batch: invalid int_or_auto value: 'some'" in capsys.readouterr().err
 
 
@@ -213,7 +214,7 @@ def test_compact_after_is_the_last_recovery_check_or_names_the_flag():
     value names the flag and what it allows."""
     from types import SimpleNamespace
 
-    from experiments.train import compact_after
+    from experiments.common.training import compact_after
 
     specs = [SimpleNamespace(fault_start=1.0, fault_duration=d) for d in (0.0, 0.08, 0.05)]
     def grid(n_buses):
@@ -249,6 +250,6 @@ def test_a_training_error_starts_on_a_new_line(tmp_path, capsys, monkeypatch):
         return make_trainer(*args, **kwargs)._replace(iteration=fail)
 
     monkeypatch.setattr(ars.train, "make_trainer", failing_trainer)
-    assert main(TINY + ["--iterations", "2", "--out", str(tmp_path)], DEFAULTS) == 2
+    assert run(TINY + ["--iterations", "2", "--out", str(tmp_path)], "train_39bus") == 2
     err = capsys.readouterr().err
     assert "\nerror: broken iteration" in err, err

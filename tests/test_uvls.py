@@ -8,6 +8,8 @@ case, shortened to 6 s as in tests/test_env.py, in one compiled rollout shared b
 """
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -15,6 +17,7 @@ import pytest
 
 from baselines.uvls import UvlsParams, check_params, uvls_policy
 from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.episode import rollout
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 from jaxgrid.study import builtin
 
@@ -56,7 +59,7 @@ def drive(env, relay, vm_action, params=None, left0=None, history_env=None):
         obs = np.concatenate([vm, left])
         stacked = np.tile(obs, use.config.history) if stacked is None else \
             np.concatenate([stacked[use.obs_size:], obs])
-        action, carry = apply(params, jnp.asarray(stacked), carry)
+        action, carry = apply(params, jnp.asarray(stacked), carry, None)
         action = np.asarray(action)
         assert np.all((action <= 0) & (action >= -0.2 - FRACTION_TOL)), \
             f"action {action} outside the env's range [-0.2, 0]"
@@ -194,7 +197,7 @@ def episodes(study, env):
     batch = stack_tasks([make_task(grid, f) for f in faults])
     policy_apply, params, carry = uvls_policy(env)
     off = params.replace(fractions=np.zeros_like(params.fractions))
-    run = jax.jit(env.rollout, static_argnums=(0, 6))
+    run = jax.jit(functools.partial(rollout, env), static_argnums=(0, 6))
     return {name: jax.tree.map(np.asarray, run(policy_apply, p, batch, EnvParams(), grid, carry,
                                                True))
             for name, p in (("uvls", params), ("none", off))}

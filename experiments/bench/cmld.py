@@ -33,14 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.bench.inputs import SHARED, without_bad_machines
 from jaxgrid.compile import CompileOptions, compile_model
-from jaxgrid.io.dyr import DyrData, read_dyr
-from jaxgrid.models.base import ModelError
+from jaxgrid.io.dyr import read_dyr
 from jaxgrid.models.machines import MACHINES
 from jaxgrid.io.raw import read_raw
+from jaxgrid.records import DyrData
 from jaxgrid.simulate import FaultEvent, make_task, simulate_batch, stack_tasks
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "cases"
 IEEE300 = SHARED / "ieee300"
 TASK_FILE = IEEE300 / ("IEEE300_RL_loadShedding_zone1_continuous_LSTM_new_lessfaultbuses_"
                        "moreActionBuses_multipfcases.json")
@@ -62,24 +62,6 @@ def _compile(raw: Path, dyr: Path | DyrData, strict: bool = True):
         data = dyr if isinstance(dyr, DyrData) else read_dyr(dyr)
         model = compile_model(case, data, CompileOptions(strict=strict))
     return model, time.perf_counter() - start
-
-
-def without_bad_machines(path: Path) -> tuple[DyrData, list[str]]:
-    """The DYR data without machine records their model rejects, and the reasons.
-
-    ACTIVSg2000's cmld file has GENSAL records with Xl = X''d, which the machine models
-    reject (spec machines-exciters-governors.md: Xl < X''d); in lenient mode their
-    generators become constant-admittance negative loads.
-    """
-    data, kept, dropped = read_dyr(path), [], []
-    for r in data.records:
-        try:
-            if r.model in MACHINES:
-                MACHINES[r.model].read([r])
-            kept.append(r)
-        except ModelError as error:
-            dropped.append(str(error))
-    return dataclasses.replace(data, records=tuple(kept)), dropped
 
 
 def _drift(model, vm_flat) -> dict:

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 from baselines.ppo import PPOConfig, gymnax_env, make_ppo
 from baselines.ppo_train import host_state, make_chunk
 from experiments.bench.timing import timed, write_report
-from jaxgrid.study import load_study
+from experiments.common.studyargs import load_study
 
 
 def shape_config(text: str) -> PPOConfig:

@@ -6,7 +6,7 @@
 `ACTIVSg2000.RAW` + `ACTIVSg2000_dyn_acmotor_zone3_v1.dyr` from ../shared/cases, compiled
 leniently: the unsupported models are dropped with the fallbacks `jaxgrid.compile` names,
 and machine records their model rejects (GENSAL with Xl = X''d) are dropped too
-(`cmld.without_bad_machines`); both lists go into the JSON. The DYR's 1125 ACMTBLU1
+(`inputs.without_bad_machines`); both lists go into the JSON. The DYR's 1125 ACMTBLU1
 records name buses 10000 + N (the zone-3 loads behind transformers, as the PNNL 300-bus
 edit puts them on 20000 + N), which ACTIVSg2000.RAW does not have: each goes onto bus N's
 load with the same ID, without the transformer (`motors_on_raw_buses`; a speed figure,
@@ -26,12 +26,12 @@ import warnings
 
 import numpy as np
 
-from experiments.bench.cmld import SHARED, without_bad_machines
+from experiments.bench.inputs import SHARED, without_bad_machines
 from experiments.bench.timing import timed, write_report
-from experiments.bench.profile_step import profile_model
+from experiments.bench.profiling import profile_model
 from jaxgrid.compile import CompileOptions, compile_model
-from jaxgrid.io.dyr import DyrData
 from jaxgrid.io.raw import read_raw
+from jaxgrid.records import DyrData
 from jaxgrid.simulate import FaultEvent, make_task, simulate_batch, stack_tasks
 
 RAW = SHARED / "activsg2000/ACTIVSg2000.RAW"

@@ -28,17 +28,17 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from experiments.andes_reference import run_andes, write_psse_dyr
+from experiments.reference.andes_files import run_andes, write_psse_dyr
+from experiments.bench.inputs import SHARED
 from experiments.bench.timing import sharded_timings, write_report
+from experiments.common.studyargs import load_study
 from jaxgrid import network
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
-from jaxgrid.study import builtin
 from jaxgrid.simulate import (FaultEvent, heun_step, make_task, simulate_batch,
                               stack_tasks)
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "cases"
 T_END, DT, SAMPLE = 10.0, 0.005, 0.1  # s
 LOAD_BUSES = ()  # no controllable loads in the file cases: see the module docstring
 STUDY_CASES = ("ieee39_fidvr", "ieee300_fidvr")
@@ -72,7 +72,7 @@ def step_compile_seconds(model, dt: float) -> float:
 def load_case(name: str):
     """(model, dt s, (raw, dyr) files for ANDES or None) of a benchmark case."""
     if name in STUDY_CASES:
-        study = builtin(name)
+        study = load_study(name)
         return study.point(0), study.config.dt, None
     raw_fn, dyr_fn, drop = CASES[name]
     folder = tempfile.mkdtemp()

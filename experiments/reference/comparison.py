@@ -26,11 +26,13 @@ LEVELS = (0.9, 0.8)  # p.u.: the comparison's "time below" levels
 # jaxgrid on the same inputs
 # --------------------------------------------------------------------------- #
 
-def jaxgrid_model(raw: str, dyr: str, heating: str, contactor: str = "memory") -> GridModel:
+def jaxgrid_model(raw: str, dyr: str, heating: str, contactor: str = "memory",
+                  stiff_below: float = MotorOptions().stiff_below) -> GridModel:
     """The compiled model of the files with the default options but the A/C motors'
-    `heating` and `contactor` rules, from a power flow without generator Q limits, as
-    GridPACK's (`gridpack_files.Q_LIMITS`)."""
-    options = CompileOptions(motors=MotorOptions(heating=heating, contactor=contactor))
+    `heating` and `contactor` rules and the induction motors' `stiff_below` (s), from a
+    power flow without generator Q limits, as GridPACK's (`gridpack_files.Q_LIMITS`)."""
+    options = CompileOptions(motors=MotorOptions(heating=heating, contactor=contactor,
+                                                 stiff_below=stiff_below))
     case = read_raw(raw)
     pf = solve(case, PowerFlowOptions(enforce_q_limits=False))
     return compile_model(case, read_dyr(dyr), options, pf)
@@ -151,7 +153,8 @@ def against(setup: Setup, cases: list[tuple[Fault, Run]], workdir: Path,
     model compiled from the setup's files with the default options, unless given."""
     if model is None:
         dyr = edited_dyr(setup.dyr, setup.edit, workdir / "edited.dyr")
-        model = jaxgrid_model(setup.raw, dyr, setup.heating, setup.contactor)
+        model = jaxgrid_model(setup.raw, dyr, setup.heating, setup.contactor,
+                              setup.stiff_below)
     t_end = setup.t_end if t_end is None else t_end
     cases = [(fault, ref.until(t_end)) for fault, ref in cases]
     buses = sorted({int(b) for _, ref in cases for b in ref.bus_ids} & set(model.bus_numbers))

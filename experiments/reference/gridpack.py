@@ -2,7 +2,8 @@
 
     python -m experiments.reference.gridpack --raw R --dyr D --faults 4:0.08 15:0.05 \\
         [--fault-start 1.0] [--t-end 10] [--dt 0.005] [--heating stalled|gridpack] \\
-        [--buses 4 504 ...] --out DIR [--save-references DIR2]
+        [--buses 4 504 ...] [--motors 504 ...] [--motor-cons NAME=VALUE ...] \\
+        [--add-records "504, 'CIM6BL', 1, ... /" ...] --out DIR [--save-references DIR2]
     python -m experiments.reference.gridpack --study FILE --tasks train --out DIR
         (the study's faults at each operating point, jaxgrid with the study's models)
     python -m experiments.reference.gridpack --references tests/references/gridpack/*.npz --out DIR
@@ -18,6 +19,10 @@ and thermal-trip times. Writes DIR/comparison.json and DIR/comparison.png (the w
 voltages) and prints a table. --save-references keeps GridPACK's trajectories as compressed
 npz files with the command that made them (`save_reference`); --references compares jaxgrid
 against such files without GridPACK (what the tests do).
+
+--motors keeps only some ACMTBLU1 motors, --motor-cons changes their CONs and --add-records
+adds DYR records (another motor model, e.g. CIM6BL) in place of the ACMTBLU1 of their bus
+and load id, in both simulators' files (model-level checks; `MotorEdit`).
 
 `--heating stalled` (default) runs GridPACK with ACMOTOR_HEAT_STALLED_ONLY=1 (running motors
 add no heat, the PSS/E reading; the kit's switch) and jaxgrid with heating "stalled";
@@ -36,12 +41,12 @@ from pathlib import Path
 from experiments.reference.comparison import against, plot, worst
 from experiments.reference.gridpack_files import (DRIVER, Fault, GridpackMissing, MotorEdit,
                                                   Setup, edited_dyr, find_driver,
-                                                  load_reference, run_gridpack,
+                                                  load_reference, motor_buses, run_gridpack,
                                                   save_reference)
 from jaxgrid.case import CaseError
-from jaxgrid.io.dyr import DyrError, read_dyr
+from jaxgrid.io.dyr import DyrError
 from jaxgrid.models.base import ModelError
-from jaxgrid.models.options import CONTACTORS, HEATING
+from jaxgrid.models.options import CONTACTORS, HEATING, MotorOptions
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m experiments.reference.gridpack",
@@ -65,6 +70,12 @@ def _parser() -> argparse.ArgumentParser:
                         "stay static)")
     p.add_argument("--motor-cons", nargs="+", default=[], metavar="NAME=VALUE",
                    help="set ACMTBLU1 CONs of the kept motors, e.g. fuvr=0.3 ttr1=0.05")
+    p.add_argument("--add-records", nargs="+", default=[], metavar="RECORD",
+                   help="DYR records to add, e.g. \"504, 'CIM6BL', 1, 1, 0.01, ...\"; each "
+                        "replaces the ACMTBLU1 of its bus and load id")
+    p.add_argument("--stiff-below", type=float, default=MotorOptions().stiff_below,
+                   help="jaxgrid's induction-motor stiff_below, s (0: keep every cage, as "
+                        "GridPACK)")
     p.add_argument("--buses", nargs="+", type=int,
                    help="buses to compare (default: the fault buses and the motor buses)")
     p.add_argument("--references", nargs="+", default=[],
@@ -93,7 +104,7 @@ def _edit(args) -> MotorEdit:
             cons.append((name.strip().lower(), float(value)))
         except ValueError:
             raise ValueError(f"--motor-cons {text!r}: expected NAME=VALUE") from None
-    return MotorEdit(tuple(args.motors), tuple(cons))
+    return MotorEdit(tuple(args.motors), tuple(cons), tuple(args.add_records))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -143,7 +154,7 @@ def _gridpack_runs(args, command: str, tmp: Path) -> dict:
         raise ValueError("give --raw, --dyr and --faults (or --study FILE, or --references "
                          "FILES)")
     setup = Setup(args.raw, args.dyr, args.t_end, args.dt, args.heating, _edit(args),
-                  args.contactor)
+                  args.contactor, args.stiff_below)
     faults = [_fault(text, args.fault_start) for text in args.faults]
     return {setup: _run_all(args, setup, faults, command, tmp)}
 
@@ -174,7 +185,7 @@ def _run_all(args, setup: Setup, faults: list[Fault], command: str, tmp: Path) -
     """[(fault, GridPACK Run, where it was saved or "gridpack")] of `faults` on `setup`."""
     driver = find_driver(args.gridpack)
     dyr = edited_dyr(setup.dyr, setup.edit, tmp / "edited.dyr")
-    motors = sorted({r.bus for r in read_dyr(dyr).by_model("ACMTBLU1")})
+    motors = motor_buses(dyr, setup.edit)
     cases = []
     for fault in faults:
         buses = args.buses or sorted({fault.bus, *motors})

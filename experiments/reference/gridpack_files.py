@@ -20,6 +20,7 @@ from jaxgrid.case import Case
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import raw_version, read_raw
 from jaxgrid.models.acmotor import Acmtblu1
+from jaxgrid.models.options import MotorOptions
 
 FAULT_X = 1e-9  # p.u.: GridPACK's faultEvent puts −j1e9 on the faulted bus's diagonal
 GRIDPACK_COMMIT = "bea5ce1"  # the kit's source snapshot (../shared/reference/gridpack)
@@ -249,16 +250,18 @@ def read_gridpack_csv(observations: Path, motor_watch: Path, dt: float) -> Run:
 
 @dataclasses.dataclass(frozen=True)
 class MotorEdit:
-    """ACMTBLU1 records to keep (RAW bus numbers; empty: all) and CONs to set on them
-    ({name: value}, names as in `jaxgrid.models.acmotor.Acmtblu1.cons`); a dropped motor's
-    load stays a static load."""
+    """ACMTBLU1 records to keep (RAW bus numbers; empty: all), CONs to set on them
+    ({name: value}, names as in `jaxgrid.models.acmotor.Acmtblu1.cons`) and DYR records to
+    add (text, e.g. a CIM6BL), each replacing the ACMTBLU1 of its bus and load id; a dropped
+    motor's load stays a static load."""
 
     keep: tuple[int, ...] = ()
     cons: tuple[tuple[str, float], ...] = ()
+    records: tuple[str, ...] = ()
 
     @property
     def empty(self) -> bool:
-        return not (self.keep or self.cons)
+        return not (self.keep or self.cons or self.records)
 
 
 def edited_dyr(dyr: str, edit: MotorEdit, out: Path) -> str:
@@ -274,19 +277,40 @@ def edited_dyr(dyr: str, edit: MotorEdit, out: Path) -> str:
     missing = sorted(set(edit.keep) - {r.bus for r in records})
     if missing:
         raise ValueError(f"--motors {missing}: {dyr} has no ACMTBLU1 record there")
+    added = [text.strip().rstrip("/").strip() + " /" for text in edit.records]
+    replaced = {(r.bus, r.device_id) for r in _added_records(edit, out)}
     drop, kept = set(), []
     for r in records:
         end = next(k for k in range(r.line - 1, len(lines)) if "/" in lines[k])
         drop.update(range(r.line - 1, end + 1))
-        if not edit.keep or r.bus in edit.keep:
+        if (not edit.keep or r.bus in edit.keep) and (r.bus, r.device_id) not in replaced:
             cons = list(r.cons)
             for name, value in edit.cons:
                 cons[names.index(name)] = value
             values = ", ".join(f"{v:g}" for v in (*r.header, *r.icons, *cons))
             kept.append(f"{r.bus}, 'USRLOD', {r.device_id}, 'ACMTBLU1', {values} /")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join([x for k, x in enumerate(lines) if k not in drop] + kept) + "\n")
+    out.write_text("\n".join([x for k, x in enumerate(lines) if k not in drop] + kept + added)
+                   + "\n")
     return str(out)
+
+
+def _added_records(edit: MotorEdit, out: Path) -> list:
+    """The DYR records `edit` adds, read through a scratch file beside `out`."""
+    if not edit.records:
+        return []
+    scratch = out.with_name(out.stem + "_added.dyr")
+    scratch.parent.mkdir(parents=True, exist_ok=True)
+    scratch.write_text("".join(t.strip().rstrip("/").strip() + " /\n" for t in edit.records))
+    return list(read_dyr(scratch, strict=False).records)
+
+
+def motor_buses(edited: str, edit: MotorEdit) -> list[int]:
+    """RAW buses of the A/C motors in `edited` (a DYR written by `edited_dyr` with `edit`)
+    and of the records `edit` adds."""
+    added = _added_records(edit, Path(edited))
+    return sorted({r.bus for r in read_dyr(edited).by_model("ACMTBLU1")}
+                  | {r.bus for r in added})
 
 
 # --------------------------------------------------------------------------- #
@@ -296,8 +320,8 @@ def edited_dyr(dyr: str, edit: MotorEdit, out: Path) -> str:
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """What both simulators run, besides the fault: files (paths as given), horizon and step
-    (s), A/C motor heating (both) and edit, and jaxgrid's contactor rule (GridPACK has
-    its own)."""
+    (s), A/C motor heating (both) and edit, jaxgrid's contactor rule (GridPACK has its own)
+    and jaxgrid's `MotorOptions.stiff_below` (s; GridPACK integrates every cage)."""
 
     raw: str
     dyr: str
@@ -306,6 +330,7 @@ class Setup:
     heating: str = "stalled"
     edit: MotorEdit = MotorEdit()
     contactor: str = "memory"
+    stiff_below: float = MotorOptions().stiff_below
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -314,7 +339,8 @@ class Setup:
     def from_json(cls, d: dict) -> Setup:
         edit = d.get("edit") or {}
         return cls(**dict(d, edit=MotorEdit(tuple(edit.get("keep", ())),
-                                            tuple(tuple(c) for c in edit.get("cons", ())))))
+                                            tuple(tuple(c) for c in edit.get("cons", ())),
+                                            tuple(edit.get("records", ())))))
 
 
 def save_reference(path: Path, run: Run, fault: Fault, setup: Setup, command: str,

@@ -13,9 +13,9 @@ from __future__ import annotations
 import jax
 import numpy as np
 
+from experiments.common.curves import smoothed
 from experiments.reproduce import claims
 from experiments.reproduce.runs import Runs, convergence_iteration, metrics_rows
-from experiments.train import smoothed
 
 # what a convergence row holds for a run that settles only in its last window, if at all
 NOT_SETTLED = "not settled"
@@ -394,7 +394,7 @@ def _trained_policies(runs: Runs) -> dict:
 def tab3(runs: Runs, path) -> dict:
     """Decision latency of the trained PARS policies (their own widths and inputs), UVLS and
     the MPC (`experiments.bench.latency`)."""
-    from experiments.bench.latency import bench_study
+    from experiments.bench.controller_latency import bench_study
 
     plt = _plt()
     s = runs.settings

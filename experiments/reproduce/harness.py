@@ -171,7 +171,7 @@ PPO_FLAGS_SET_HERE = ("--study", "--raw", "--dyr", "--task-config", "--sim-confi
 def _ppo_flags(text: str) -> tuple[str, ...]:
     """'--envs 500 --minibatches 400' -> its words, once `experiments.train_ppo` accepts them
     as a configuration (argparse names --ppo-flags otherwise)."""
-    from experiments.train_ppo import config_from_args, parser
+    from experiments.common.ppo_training import config_from_args, parser
 
     words, train_ppo = tuple(shlex.split(text)), parser()
     train_ppo.allow_abbrev = False  # '--env-s' must not slip in as --env-steps

@@ -4,8 +4,9 @@ A run's folder (or file) under OUT/runs/ is named by what it is and a hash of ev
 depends on: the study (its TOML text) and the run's settings. A finished run is reused; a
 training run that was interrupted resumes from its last checkpoint; a changed input gives a
 new name, so nothing stale is ever read back. PARS and PPO trainings are library calls
-(`experiments.train.train_study` and `experiments.train_ppo.train_study`), named by their
-`ars.train.TrainConfig` and `baselines.ppo_train.PPOTrainConfig`.
+(`experiments.common.training.train_study` and `experiments.common.ppo_training
+.train_study`), named by their `ars.train.TrainConfig` and
+`baselines.ppo_train.PPOTrainConfig`.
 """
 from __future__ import annotations
 
@@ -22,13 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ars.pars import ParsConfig, init_state
-from ars.train import TrainConfig, make_trainer
+from ars.pars import init_state
+from ars.train import make_trainer
 from experiments.reproduce.claims import best_ppo_seed
-from experiments.train import (SMOOTHING, compact_after, paper_preset, smoothed, task_batch,
-                               train_study, widths)
-from jaxgrid.rollouts import rollout_specs, training_problem
-from jaxgrid.study import Study, load_study, write_study
+from experiments.common.studyargs import load_study
+from experiments.common.curves import SMOOTHING, smoothed
+from experiments.common.training import (Choices, paper_preset, problem, train_config,
+                                         train_study)
+from jaxgrid.rollouts import rollout_specs
+from jaxgrid.study import Study, write_study
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -41,7 +44,7 @@ class Settings:
       iterations: PARS iterations per training (the paper: 500).  seeds: PARS seeds per
         configuration.
       directions: N of the study's main policy (fig6a, fig7, fig8, fig10_11, fig12, tab3,
-        fig13, generalisation), None for the paper's (`experiments.train.paper_preset`:
+        fig13, generalisation), None for the paper's (`experiments.common.training.paper_preset`:
         16 on the 39-bus, 128 on the 300-bus).  sweep: N of fig6b.  sweep_large: N of fig9.
       tasks_per_iteration: m.  episode: s, None for the study's (the study written to
         OUT/study.toml carries it, so every run uses it).
@@ -138,29 +141,22 @@ class Runs:
         return folder
 
     # --- PARS ------------------------------------------------------------------------------
-    def pars_config(self, policy: str, directions: int) -> tuple[TrainConfig, dict]:
-        """(TrainConfig, `training_problem` arguments) of a PARS training of `policy` with
-        N = directions, b = N/2, the preset's widths and decay, its task batch on CPUs and
-        all m tasks in one batch on a GPU (`experiments.train.task_batch`: a speed setting,
-        results equal to float rounding, so a run folder keeps the preset's in its name),
-        on the large grid regrouped after the recovery check
-        (`experiments.train.compact_after`), the study's history for the policy kind and its
-        task sampling, `settings.seeds` seeds in one program (the config's out and resume
-        are `pars`'s)."""
+    def pars_choices(self, policy: str, directions: int) -> Choices:
+        """The `Choices` of a PARS training of `policy` with N = directions, the paper's other
+        settings for the grid's size (`experiments.common.training.train_config`: b = N/2,
+        the preset's widths, decay and task batch, the large grid regrouped after the
+        recovery check), the study's history for the policy kind and its task sampling,
+        `settings.seeds` seeds in one program."""
         s = self.settings
-        pars = ParsConfig(directions=directions, top=max(1, directions // 2),
-                          decay=self.preset["decay"], tasks_per_iteration=s.tasks_per_iteration,
-                          task_batch=task_batch("auto", self.preset["task_batch"]),
-                          compact_after=compact_after("auto", self.study))
-        config = TrainConfig(policy=policy, hidden=() if policy == "linear"
-                             else widths(self.preset["hidden"]), pars=pars,
-                             iterations=s.iterations, seeds=s.seeds)
-        return config, {"history": self.study.history(policy),
-                        "sampling": self.study.definition.training.task_sampling}
+        return Choices(policy=policy, directions=directions,
+                       tasks_per_iteration=s.tasks_per_iteration, iterations=s.iterations,
+                       seeds=s.seeds, history=self.study.history(policy),
+                       task_sampling=self.study.definition.training.task_sampling)
 
     def pars_folder(self, policy: str, directions: int) -> Path:
         """The run folder of that PARS training (made, not trained), named by its config."""
-        config, problem = self.pars_config(policy, directions)
+        choices = self.pars_choices(policy, directions)
+        config = train_config(self.study, choices)
         inputs = {k: v for k, v in dataclasses.asdict(config).items()
                   if k not in ("out", "resume")}
         for speed_only in ("compact_after", "compact_chunks"):  # folders named as before them
@@ -168,7 +164,9 @@ class Runs:
         if inputs["obs_clip"] is None:  # named as before it
             inputs.pop("obs_clip")
         inputs["pars"]["task_batch"] = self.preset["task_batch"]  # the same on a GPU
-        return self.folder(f"pars_{policy}_N{directions}", {"config": inputs, **problem})
+        return self.folder(f"pars_{policy}_N{directions}",
+                           {"config": inputs, "history": choices.history,
+                            "sampling": choices.task_sampling})
 
     def pars_finished(self, folder: Path) -> bool:
         rows = metrics_rows(folder / "metrics.jsonl")
@@ -176,16 +174,15 @@ class Runs:
             folder / "policy").is_dir()
 
     def pars(self, policy: str, directions: int) -> Path:
-        """A finished PARS training (`pars_config`, `experiments.train.train_study`); its
+        """A finished PARS training (`pars_choices`, `experiments.common.training.train_study`); its
         folder. An interrupted one resumes from its last checkpoint."""
         folder = self.pars_folder(policy, directions)
         self.trainings.add(folder)
         if self.pars_finished(folder):
             return folder
-        config, problem = self.pars_config(policy, directions)
         resume = any((folder / "checkpoints").glob("[0-9]*"))
-        train_study(self.study, dataclasses.replace(config, out=str(folder), resume=resume),
-                    **problem)
+        train_study(self.study, dataclasses.replace(self.pars_choices(policy, directions),
+                                                    out=str(folder), resume=resume))
         return folder
 
     def training_time(self) -> tuple[float, list[str]]:
@@ -253,8 +250,8 @@ class Runs:
         """A finished PPO training (`experiments.train_ppo.train_study`, the study's Table II
         defaults with `settings.ppo_flags`) of `env_steps` environment steps; its folder,
         named by its `baselines.ppo_train.PPOTrainConfig`. An interrupted one resumes."""
-        from experiments.train_ppo import config_from_args, parser
-        from experiments.train_ppo import train_study as train_ppo_study
+        from experiments.common.ppo_training import config_from_args, parser
+        from experiments.common.ppo_training import train_study as train_ppo_study
 
         flagged = config_from_args(parser().parse_args(list(self.settings.ppo_flags)))
         config = dataclasses.replace(flagged, env_steps=env_steps,
@@ -278,7 +275,7 @@ class Runs:
     # --- evaluations -----------------------------------------------------------------------
     def evaluation(self, control: str, tasks: str = "test") -> dict:
         """`experiments.evaluate` of `control` on a task set, cached."""
-        from experiments.evaluate import evaluate
+        from experiments.common.evaluation import evaluate
 
         path = self.folder("eval", {**self._controller_inputs(control), "tasks": tasks})
         path = path / "result.json"
@@ -292,7 +289,7 @@ class Runs:
         """One episode of `control` on a fault at `fault_bus` lasting `duration` s at the first
         operating point, cached: t (s), vm (steps, observed buses) p.u., shed_mw cumulative,
         reward, recovered, observed (bus numbers)."""
-        from experiments.evaluate import controlled_env
+        from experiments.common.evaluation import controlled_env
         from jaxgrid.tasks import TaskSpec
 
         path = self.folder("trace", {**self._controller_inputs(control), "bus": fault_bus,
@@ -323,24 +320,23 @@ class Runs:
 
     # --- timing ----------------------------------------------------------------------------
     def iteration_seconds(self, devices: int) -> float:
-        """Median seconds of one iteration of the main LSTM training (`pars_config` with
+        """Median seconds of one iteration of the main LSTM training (`pars_choices` with
         N = directions, one seed) on a mesh of the first `devices` CPU devices of this
         process, after its compile."""
         import jax
         from jax.sharding import Mesh
 
-        config, problem_args = self.pars_config("lstm", self.directions)
-        config = dataclasses.replace(config, seeds=None)
+        choices = dataclasses.replace(self.pars_choices("lstm", self.directions), seeds=None)
+        config = train_config(self.study, choices)
         mesh = Mesh(np.array(jax.devices()[:devices]), ("batch",))
-        problem = training_problem(self.study, "lstm", **problem_args)
-        trainer = make_trainer(problem, config, mesh)
+        grid = problem(self.study, choices)
+        trainer = make_trainer(grid, config, mesh)
         state = init_state(trainer.policy, config.pars)
-        state, _ = jax.block_until_ready(trainer.iteration(state, problem.tasks, problem.data))
+        state, _ = jax.block_until_ready(trainer.iteration(state, grid.tasks, grid.data))
         times = []
         for _ in range(self.settings.timing_iterations):
             start = time.perf_counter()
-            state, _ = jax.block_until_ready(trainer.iteration(state, problem.tasks,
-                                                               problem.data))
+            state, _ = jax.block_until_ready(trainer.iteration(state, grid.tasks, grid.data))
             times.append(time.perf_counter() - start)
         return float(np.median(times))
 
@@ -351,7 +347,8 @@ class Runs:
         `s_per_iteration` is the best of its warm calls."""
         path = Path(self.settings.gpu_timing)
         report = json.loads(path.read_text())
-        regrouped = self.pars_config("lstm", self.directions)[0].pars.compact_after
+        regrouped = train_config(self.study, self.pars_choices(
+            "lstm", self.directions)).pars.compact_after
         rows = sorted((r for case in report["cases"]
                        if self.study.name in (case["case"], Path(case["case"]).stem)
                        for r in case["runs"]

@@ -11,9 +11,9 @@ from __future__ import annotations
 from jaxgrid.case import Case
 from jaxgrid.cases import fidvr, ieee  # noqa: F401  (importing them registers their cases)
 from jaxgrid.cases.fidvr import StudyCase
-from jaxgrid.cases.registry import describe, names, spec
+from jaxgrid.cases.registry import names, spec
 
-__all__ = ["StudyCase", "describe", "load", "names"]
+__all__ = ["StudyCase", "load", "names"]
 
 
 def load(name: str, **params) -> Case | StudyCase:

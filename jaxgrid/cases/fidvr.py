@@ -82,13 +82,13 @@ import numpy as np
 from jaxgrid.case import SLACK, Case, build_case, to_rows
 from jaxgrid.cases.registry import register
 from jaxgrid.cases.ieee import ieee39, ieee300, move_loads_behind_transformers
-from jaxgrid.io.dyr import DyrData, DyrRecord
 from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.models.base import DeviceModel
 from jaxgrid.models.exciters import Ieeet1
 from jaxgrid.models.governors import Hygov, Tgov1
 from jaxgrid.models.machines import Genrou
 from jaxgrid.powerflow import bus_loads, solve
+from jaxgrid.records import DyrData, DyrRecord
 
 # Allowed load_level per case (module docstring).
 LOAD_LEVEL_RANGE = {"ieee39_fidvr": (0.5, 1.4), "ieee300_fidvr": (0.5, 1.0)}
@@ -195,7 +195,7 @@ class StudyCase:
       dt: integration step of the study, s.
       sweeps: network fixed-point sweeps per solution. dt and sweeps are the fastest pair
         accurate to p99 |ΔV| <= 1e-3 p.u. against a float64 1-ms 4-sweep reference
-        (`experiments.step_accuracy`, docs/studies.md "Step size by accuracy").
+        (`experiments.diagnostics.step_accuracy`, docs/studies.md "Step size by accuracy").
       load_level: factor on every load and generator dispatch (1 = the base case).
       description: one paragraph on how the case was built.
       reward: the study's `jaxgrid.env.EnvParams` values by field name.
@@ -216,9 +216,10 @@ class StudyCase:
     task_sets: dict
 
 
-@register("ieee39_fidvr", "IEEE 39-bus FIDVR study: A/C motors at 504/507/518, GENROU + IEEET1 "
-                          "+ TGOV1/HYGOV (load_level=1.0)")
+@register("ieee39_fidvr")
 def ieee39_fidvr(load_level: float = 1.0) -> StudyCase:
+    """IEEE 39-bus FIDVR study at `load_level`: A/C motors at 504/507/518, GENROU + IEEET1 +
+    TGOV1/HYGOV (StudyCase.description)."""
     level = _check_level(load_level, "ieee39_fidvr")
     base, mbase = _ieee39_base()
     case = _at_level(base, level, "ieee39_fidvr")
@@ -245,9 +246,10 @@ def ieee39_fidvr(load_level: float = 1.0) -> StudyCase:
                      "governors (HYGOV at bus 30)."))
 
 
-@register("ieee300_fidvr", "IEEE 300-bus FIDVR study: zone-1 loads on 200xx buses with A/C "
-                           "motors, GENROU + IEEET1 + TGOV1 (load_level=1.0)")
+@register("ieee300_fidvr")
 def ieee300_fidvr(load_level: float = 1.0) -> StudyCase:
+    """IEEE 300-bus FIDVR study at `load_level`: zone-1 loads on 200xx buses with A/C motors,
+    GENROU + IEEET1 + TGOV1 (StudyCase.description)."""
     level = _check_level(load_level, "ieee300_fidvr")
     base, observed = _ieee300_base()
     case = _at_level(base, level, "ieee300_fidvr")

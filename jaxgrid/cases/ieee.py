@@ -62,15 +62,17 @@ def move_loads_behind_transformers(case: Case, buses, offset: int,
     return build_case(**rows)
 
 
-@register("ieee39", "IEEE 39-bus (New England), study loads at 504/507/508/518 behind transformers")
+@register("ieee39")
 def ieee39() -> Case:
+    """IEEE 39-bus (New England), the study's loads at 504/507/508/518 behind transformers."""
     case = move_loads_behind_transformers(load_pypower_case("case39"), STUDY_LOAD_BUSES_39,
                                           offset=500, x=STEP_DOWN_X)
     return _renamed(case, "ieee39")
 
 
-@register("ieee300", "IEEE 300-bus test system (MATPOWER data)")
+@register("ieee300")
 def ieee300() -> Case:
+    """IEEE 300-bus test system (MATPOWER data)."""
     return _renamed(load_pypower_case("case300"), "ieee300")
 
 

@@ -12,23 +12,22 @@ from typing import Any
 
 @dataclasses.dataclass(frozen=True)
 class CaseSpec:
-    """A registered builder and what it builds."""
+    """A registered builder (its docstring says what it builds)."""
 
     name: str
     build: Callable[..., Any]
-    description: str
 
 
 _REGISTRY: dict[str, CaseSpec] = {}
 
 
-def register(name: str, description: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+def register(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Decorator: register `build(**params) -> Case | StudyCase` under `name`."""
 
     def decorate(build: Callable[..., Any]) -> Callable[..., Any]:
         if name in _REGISTRY:
             raise ValueError(f"case {name!r} is registered twice")
-        _REGISTRY[name] = CaseSpec(name, build, description)
+        _REGISTRY[name] = CaseSpec(name, build)
         return build
 
     return decorate
@@ -37,11 +36,6 @@ def register(name: str, description: str) -> Callable[[Callable[..., Any]], Call
 def names() -> tuple[str, ...]:
     """Registered case names."""
     return tuple(sorted(_REGISTRY))
-
-
-def describe(name: str) -> str:
-    """One-line description of a registered case."""
-    return spec(name).description
 
 
 def spec(name: str) -> CaseSpec:

@@ -26,15 +26,19 @@ Reader conventions beyond the manual: text after a ``/`` on the same line
 starts another record when it begins with an integer (the next IBUS) and is a
 trailing comment otherwise; a file may begin with a UTF-8 BOM; Fortran reals
 such as ``0.33E-01``, ``5.``, ``-.5`` and ``1.0D-3`` are accepted.
+
+The records it returns (`DyrRecord`, `DyrData`) are defined in `jaxgrid.records`, which the
+device models import without this parser.
 """
 from __future__ import annotations
 
 import os
 import re
 import warnings
-from collections import Counter
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
+
+from jaxgrid.records import DyrData, DyrRecord
 
 # Header integers of user-written records, by record type (see module docstring).
 _USER_HEADERS = {
@@ -57,44 +61,6 @@ class DyrError(ValueError):
 
 class DyrWarning(UserWarning):
     """Unsupported models in lenient mode."""
-
-
-@dataclass(frozen=True)
-class DyrRecord:
-    """One dynamic model record.
-
-    `record_type` is the second field: the model itself for ordinary records,
-    'USRLOD'/'USRMDL' for user-written ones. `icons` and `header` are empty for
-    ordinary records; a quoted ICON is kept as a string.
-    """
-
-    model: str
-    bus: int
-    device_id: str
-    cons: tuple[float, ...]
-    icons: tuple[int | str, ...]
-    header: tuple[int, ...]
-    record_type: str
-    line: int
-    source: str
-
-
-@dataclass(frozen=True)
-class DyrData:
-    """All records of one DYR file, in file order."""
-
-    source: str
-    records: tuple[DyrRecord, ...]
-    unsupported: dict[str, int]
-
-    def by_model(self, name: str) -> tuple[DyrRecord, ...]:
-        """Records whose model is `name` (case-insensitive)."""
-        name = name.upper()
-        return tuple(r for r in self.records if r.model == name)
-
-    def counts(self) -> dict[str, int]:
-        """Number of records per model, in order of first appearance."""
-        return dict(Counter(r.model for r in self.records))
 
 
 @dataclass(frozen=True)

@@ -56,6 +56,7 @@ _LINES_PER_RECORD = {"two-terminal dc": 3, "vsc dc": 3}
 REAL_FIELD = Range(-1e12, 1e12)
 INT_FIELD = Range(-(2 ** 31 - 1), 2 ** 31 - 1)
 BUS_NUMBER = Range(1, 999_999)
+DC_COUNT = Range(0, 10_000)  # converters, dc buses or dc links of a multi-terminal dc line
 SYSTEM_BASE = Range(0, 1e6, "MVA", lo_open=True)
 BASE_KV = Range(0, 1e4, "kV")
 FREQUENCY = Range(0, 1e3, "Hz")
@@ -233,16 +234,21 @@ class _RawParser:
             number, fields = start
             if fields == ["Q"]:
                 return False
+            record = _Record(fields, self.source, number, f"{section} record")
             if handler is None:
-                self._skip(section, fields)
+                self._skip(section, record)
             else:
-                handler(_Record(fields, self.source, number, f"{section} record"))
+                handler(record)
         return True
 
-    def _skip(self, section: str, fields: list[str]) -> None:
+    def _skip(self, section: str, rec: _Record) -> None:
+        """Count a record of a section not modelled and pass over its continuation lines (a
+        multi-terminal dc record: one per converter, dc bus and dc link, NCONV + NDCBS +
+        NDCLN)."""
         extra = _LINES_PER_RECORD.get(section, 1) - 1
-        if section == "multi-terminal dc" and len(fields) >= 4:
-            extra = sum(int(float(f)) for f in fields[1:4])
+        if section == "multi-terminal dc" and len(rec.fields) >= 4:
+            extra = sum(rec.int(k, name, allowed=DC_COUNT)
+                        for k, name in ((1, "NCONV"), (2, "NDCBS"), (3, "NDCLN")))
         for _ in range(extra):
             self.cursor.next(f"{section} data")
         self.skipped[section] = self.skipped.get(section, 0) + 1

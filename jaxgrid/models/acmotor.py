@@ -227,7 +227,6 @@ class Acmtblu1(LoadModel):
         f = 1.0 + jnp.where(measurable, step, 0.0) / (p["omega0"] * dt)
         vm = _lag_step(z["vm"], vmag, p["tv"], dt)
         fm = _lag_step(z["fm"], f, p["tf"], dt)
-        dfm = fm - 1.0
         heat = {part: _heating(p, part, vmag, jnp.abs(v_old), z[f"run_{part}"], z["fm"] - 1.0)
                 for part in "ab"}
         theta = {part: _lag_step(z[f"theta_{part}"], heat[part], p["tth"], dt) for part in "ab"}

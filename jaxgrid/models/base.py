@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.io.dyr import DyrRecord
+from jaxgrid.records import DyrRecord
 from jaxgrid.models.options import CompositeOptions, MotorOptions
 
 

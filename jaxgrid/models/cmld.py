@@ -81,7 +81,7 @@ from collections.abc import Sequence
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.io.dyr import DyrRecord
+from jaxgrid.records import DyrRecord
 from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.models.base import (Array, Initial, LoadModel, LoadPorts, LoadSite, ModelError,
                                  Params, States, device_label, timer_fires)

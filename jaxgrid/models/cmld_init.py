@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxgrid.case import PQ, Case, build_case, to_rows
-from jaxgrid.io.dyr import DyrRecord
+from jaxgrid.records import DyrRecord
 from jaxgrid.models.acmotor import NO_DIP, Acmtblu1
 from jaxgrid.models.base import Initial, LoadSite, ModelError, device_label
 from jaxgrid.models.cmld_cons import MOTOR_D_NAMES, MOTORS

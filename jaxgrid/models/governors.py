@@ -17,7 +17,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.io.dyr import DyrRecord
+from jaxgrid.records import DyrRecord
 from jaxgrid.models.base import (Array, Con, DeviceModel, Initial, ModelError, Params, Signals,
                                  StartPoint, States, device_label, freeze_at_limits, lag,
                                  lead_lag_output, outside_limits)

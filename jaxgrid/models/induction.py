@@ -47,7 +47,7 @@ from collections.abc import Sequence
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.io.dyr import DyrRecord
+from jaxgrid.records import DyrRecord
 from jaxgrid.models.options import MotorOptions
 from jaxgrid.models.base import (Array, Con, Initial, LoadModel, LoadPorts, LoadSite, ModelError,
                                  Params, States,

@@ -18,7 +18,7 @@ Built three ways:
     more load levels; buses, step, reward values and task sets are the case's.
   from files: RAW files (the operating points; one grid, so bus, branch, load and machine
     structure must agree), one DYR, optionally a PNNL task JSON (buses, reward, history,
-    training faults: `jaxgrid.io.pnnl`) and a PNNL simulation JSON (step, episode length).
+    training faults: `jaxgrid.study.pnnl`) and a PNNL simulation JSON (step, episode length).
   study file (TOML, `read_study`): names the built-in or the files (paths relative to the
     file, RAW paths may be glob patterns) and overrides any field of the definition:
 
@@ -36,9 +36,10 @@ Built three ways:
 reading it back gives the identical definition.
 
 The package, by idea: `definition` (the values: `StudyDefinition`, `Study`, ...),
-`sources` (what a built-in or a set of files gives: one `SourceDefaults` each), `names`
-(PNNL bus names), `build` (the definition from a source and overrides, each point's power
-flow, compile, stacking) and `toml` (the study-file codec).
+`sources` (what a built-in or a set of files gives: one `SourceDefaults` each), `pnnl`
+(the PNNL task and simulation JSON readers), `names` (PNNL bus names), `build` (the
+definition from a source and overrides, each point's power flow, compile, stacking) and
+`toml` (the study-file codec).
 """
 from __future__ import annotations
 

@@ -9,12 +9,14 @@ compiled models stacked (`jaxgrid.study.build`).
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import jax
 
 from jaxgrid.case import Case
-from jaxgrid.checks import InputError, Range, check_each
-from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.checks import InputError, Range, check_each, check_int, check_listed, check_unique
+from jaxgrid.compile import MACHINE_BASE_RULES
+from jaxgrid.env import HISTORY, SWEEPS, EnvConfig, EnvParams, LoadSheddingEnv
 from jaxgrid.grid import GridModel
 from jaxgrid.models.acmotor import MotorOptions
 from jaxgrid.models.cmld import CompositeOptions
@@ -47,12 +49,24 @@ class GridSource:
     sim_config: str | None = None
 
     def __post_init__(self):
-        if not self.load_levels:
-            raise InputError("load_levels", None, " is empty: give at least one load level")
+        """InputError naming the field of a bad value, or of one the source would not read
+        (files with a built-in, load levels with RAW files)."""
+        check_listed("load_levels", self.load_levels, "load level")
         check_each("load_levels", self.load_levels, LOAD_LEVEL)
+        check_unique("raw", self.raw)  # one file twice would be one operating point twice
+        files = {k: v for k, v in (("raw", self.raw), ("dyr", self.dyr),
+                                   ("task_config", self.task_config),
+                                   ("sim_config", self.sim_config)) if v}
+        if self.builtin and files:
+            raise InputError("builtin", self.builtin, f"a built-in study reads no files: leave "
+                             f"out {', '.join(files)}, or builtin for a study from files")
+        if self.raw and tuple(self.load_levels) != (1.0,):
+            raise InputError("load_levels", list(self.load_levels), "set a built-in study's "
+                             "operating points; a study from files has one per RAW file")
 
 
 LOAD_LEVEL = Range(0.0, 10.0, "(factor on loads and dispatch)", lo_open=True)
+PRECISIONS = ("float32", "float64")  # CompileSettings.precision (the time loop's)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,6 +83,21 @@ class CompileSettings:
     motors: MotorOptions = MotorOptions()
     loads: LoadSplit = LoadSplit()
     composite: CompositeOptions = CompositeOptions()
+
+    def __post_init__(self):
+        """InputError naming the field of a value `CompileOptions` does not take, or of a
+        non-finite number in an option table ("motors.stiff_below")."""
+        for name, allowed in (("precision", PRECISIONS), ("machine_base", MACHINE_BASE_RULES)):
+            if getattr(self, name) not in allowed:
+                raise InputError(name, getattr(self, name), f"must be one of {list(allowed)}")
+        if self.sweeps is not None:
+            check_int("sweeps", self.sweeps, SWEEPS)
+        for table in ("motors", "loads", "composite"):
+            options = getattr(self, table)
+            for field in dataclasses.fields(options):
+                value = getattr(options, field.name)
+                if isinstance(value, float) and not math.isfinite(value):
+                    raise InputError(f"{table}.{field.name}", value, "must be finite")
 
 
 POLICY_KINDS = ("linear", "fnn", "lstm")
@@ -93,15 +122,15 @@ class TrainingSettings:
     task_sampling: str = "uniform"
 
     def __post_init__(self):
-        bad = {k: v for k, v in self.history.items()
-               if k not in POLICY_KINDS or isinstance(v, bool) or not isinstance(v, int)
-               or v < 1}
-        if bad:
-            raise ValueError(f"training.history {bad}: keys from {list(POLICY_KINDS)}, values "
-                             "ints >= 1")
+        """InputError naming the field ("history.lstm") of a bad value."""
+        for kind, stacked in self.history.items():
+            if kind not in POLICY_KINDS:
+                raise InputError(f"history.{kind}", stacked, f"{kind!r} is not a policy kind "
+                                 f"({', '.join(POLICY_KINDS)})")
+            check_int(f"history.{kind}", stacked, HISTORY)
         if self.task_sampling not in TASK_SAMPLINGS:
-            raise ValueError(f"training.task_sampling = {self.task_sampling!r}: allowed "
-                             f"{list(TASK_SAMPLINGS)}")
+            raise InputError("task_sampling", self.task_sampling,
+                             f"must be one of {list(TASK_SAMPLINGS)}")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -13,10 +13,11 @@ import numpy as np
 
 from jaxgrid.busnames import resolve_bus
 from jaxgrid.case import Case
-from jaxgrid.io.dyr import DyrData
+from jaxgrid.checks import check_unique
 from jaxgrid.models.cmld import COMPOSITE_LOADS
 from jaxgrid.models.cmld_init import internal_buses
 from jaxgrid.powerflow import bus_loads
+from jaxgrid.records import DyrData
 
 
 @dataclasses.dataclass(frozen=True)
@@ -25,16 +26,21 @@ class BusTable:
     loads' internal buses (`jaxgrid.models.cmld_init.internal_buses`).
 
     Attributes:
-      source: the case.  number: {lower-case name: bus number} ("bus504",
+      source: the case.  number_by_name: {lower-case name: bus number} ("bus504",
         "bus20_loadbus").  zone, base_kv, loaded: per bus number (loaded: an in-service
         RAW load, the composite loads' load buses).
     """
 
     source: str
-    number: dict
+    number_by_name: dict
     zone: dict
     base_kv: dict
     loaded: dict
+
+    @property
+    def numbers(self):
+        """Every bus number of the grid (RAW and internal)."""
+        return self.zone.keys()
 
 
 def bus_table(case: Case, dyr: DyrData) -> BusTable:
@@ -57,7 +63,8 @@ def bus_number(name, buses: BusTable, source: str, key: str) -> int:
     """The number of a PNNL bus reference ("Bus504", "bus20001", "Bus20_loadBus", 504)
     read from `key` of file `source`."""
     try:
-        return resolve_bus(name, buses.number, buses.zone, f"the case {buses.source}")
+        return resolve_bus(name, buses.number_by_name, buses.numbers,
+                           f"the case {buses.source}")
     except ValueError as err:
         raise ValueError(f"{source}: {key}: {err}") from None
 
@@ -73,6 +80,7 @@ def bus_scope(kind: str, entries, buses: BusTable, source: str, key: str,
         if not str(z).strip().isdigit() or int(z) not in set(buses.zone.values()):
             raise ValueError(f"{source}: {key}: zone {z!r} is not a zone of {buses.source}")
         zones.append(int(z))
+    check_unique(f"{source}: {key}", zones)
     keep = (lambda b: buses.loaded[b]) if key == "actionScopeAry" else \
         (lambda b: buses.base_kv[b] > min_kv)
     return tuple(b for b, z in buses.zone.items() if z in zones and keep(b))

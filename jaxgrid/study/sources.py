@@ -2,9 +2,10 @@
 
 `builtin_source(grid)`: a `jaxgrid.cases` FIDVR `StudyCase` per load level.
 `file_source(grid)`: RAW files (one grid), a DYR, and optionally a PNNL task JSON and a PNNL
-simulation JSON (`jaxgrid.io.pnnl`), whose bus references are resolved here
+simulation JSON (`jaxgrid.study.pnnl`), whose bus references are resolved here
 (`jaxgrid.study.names`). Each turns its source-specific input into `SourceDefaults` at this
 one place; `jaxgrid.study.build` lays the overrides over them into the `StudyDefinition`.
+`fault_set(task, buses)`: a PNNL task file's fault candidates alone, as a `TaskSet`.
 """
 from __future__ import annotations
 
@@ -15,16 +16,21 @@ import numpy as np
 
 from jaxgrid import cases
 from jaxgrid.case import Case
-from jaxgrid.checks import InputError
+from jaxgrid.checks import InputError, renamed_errors
 from jaxgrid.env import EnvConfig
 from jaxgrid.grid import GridModel
-from jaxgrid.io import pnnl
-from jaxgrid.io.dyr import DyrData, read_dyr
+from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
+from jaxgrid.records import DyrData
+from jaxgrid.study import pnnl
 from jaxgrid.study.definition import PAPER_HISTORY, GridSource
 from jaxgrid.study.names import BusTable, bus_number, bus_scope, bus_table
+from jaxgrid.tasks import TaskSet
 
 FILE_SWEEPS = 2  # network sweeps of a study from files (its step's accuracy is not measured)
+# TaskSet field -> the PNNL task key of the training faults
+FAULT_KEYS = {"fault_buses": "faultBusCandidates", "fault_starts": "faultStartTimeCandidates",
+              "fault_durations": "faultDurationCandidates"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -97,8 +103,6 @@ def builtin_source(grid: GridSource) -> SourceDefaults:
 
 def file_source(grid: GridSource) -> SourceDefaults:
     """The study of `grid.raw` (one grid), `grid.dyr` and the PNNL JSON files named."""
-    if not grid.dyr:
-        raise ValueError("study: [grid] raw needs dyr = FILE")
     points, stems = [], {}
     for path in grid.raw:
         stem = Path(path).stem
@@ -136,21 +140,34 @@ def _with_task(source: SourceDefaults, task: pnnl.PnnlTask) -> SourceDefaults:
                          "observationScopeAry", min_kv=task.observed_min_kv)
     if task.observation_scope == "Zone":
         observed = observed + tuple(b for b in action if b not in observed)
-    fault_buses = tuple(bus_number(n, buses, task.source, "faultBusCandidates")
-                        for n in task.fault_buses)
+    if task.action_p_mw is not None and len(task.action_p_mw) != len(action):
+        raise InputError(f"{task.source}: actionBusesPValue", list(task.action_p_mw),
+                         f"must give one value per action bus ({len(action)})")
     written = {field: f"{task.source}: {key}" for field, key in (
         ("env.observed_buses", "observationScopeAry"), ("env.action_buses", "actionScopeAry"),
         ("env.agent_dt", "envStepTimeInSec"), ("env.history", "historyObservationSize"),
-        ("tasks.train.fault_buses", "faultBusCandidates"),
-        ("tasks.train.fault_starts", "faultStartTimeCandidates"),
-        ("tasks.train.fault_durations", "faultDurationCandidates"))}
+        *((f"tasks.train.{field}", key) for field, key in FAULT_KEYS.items()))}
     return dataclasses.replace(
         source, name=task.name, params=dict(task.params), pnnl_task=task,
         env={"observed_buses": observed, "action_buses": action, "agent_dt": task.agent_dt,
              "history": task.history, "include_action_status": task.include_action_status},
-        tasks={"train": {"fault_buses": fault_buses, "fault_starts": task.fault_starts,
+        tasks={"train": {"fault_buses": _fault_buses(task, buses),
+                         "fault_starts": task.fault_starts,
                          "fault_durations": task.fault_durations}},
         written={**source.written, **written}, notes=source.notes + _read_notes(task))
+
+
+def fault_set(task: pnnl.PnnlTask, buses: BusTable) -> TaskSet:
+    """The fault candidates of a PNNL task file as a TaskSet at every operating point, its
+    bus names resolved against `buses`; errors name the file and key."""
+    with renamed_errors(lambda field: f"{task.source}: {FAULT_KEYS.get(field, field)}"):
+        return TaskSet(_fault_buses(task, buses), task.fault_durations, task.fault_starts)
+
+
+def _fault_buses(task: pnnl.PnnlTask, buses: BusTable) -> tuple[int, ...]:
+    """The bus numbers of a PNNL task file's faultBusCandidates."""
+    return tuple(bus_number(n, buses, task.source, FAULT_KEYS["fault_buses"])
+                 for n in task.fault_buses)
 
 
 def _with_sim(source: SourceDefaults, sim: pnnl.PnnlSimConfig) -> SourceDefaults:

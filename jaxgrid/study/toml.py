@@ -17,12 +17,13 @@ import numpy as np
 import tomli_w
 
 from jaxgrid import cases
+from jaxgrid.checks import InputError
 from jaxgrid.env import EnvConfig, EnvParams
 from jaxgrid.models.acmotor import MotorOptions
 from jaxgrid.models.cmld import CompositeOptions
 from jaxgrid.models.loads import LoadSplit
 from jaxgrid.simulate import Bounds
-from jaxgrid.study.build import build, builtin, renamed_errors
+from jaxgrid.study.build import build, builtin
 from jaxgrid.study.definition import (CompileSettings, GridSource, Study, StudyDefinition,
                                       TrainingSettings)
 from jaxgrid.tasks import TaskSet
@@ -68,9 +69,11 @@ def read_study(path: str | Path, raw=None) -> Study:
         grid["raw"] = [str(Path(r).resolve()) for r in raw]
     elif "raw" in grid:
         raws = [grid["raw"]] if isinstance(grid["raw"], str) else grid["raw"]
+        if not isinstance(raws, list):
+            raise ValueError(f"{path}: grid.raw = {raws!r}: must be a path, a pattern or a "
+                             "list of them")
         grid["raw"] = [str(p) for r in raws for p in _paths(base, r, path)]
-    with renamed_errors(lambda key: f"{path}: grid.{key}"):
-        source = _typed(GridSource, grid, path, "grid")
+    source = _typed(GridSource, grid, path, "grid")
     compile_settings = _typed(CompileSettings, data.get("compile", {}), path, "compile")
     env = _fields(EnvConfig, data.get("env", {}), path, "env")
     params = _fields(EnvParams, data.get("params", {}), path, "params")
@@ -129,7 +132,15 @@ def _fields(cls, values, path, key) -> dict:
 
 
 def _typed(cls, values, path, key):
-    return cls(**_fields(cls, values, path, key))
+    """cls(**values) checked (`_fields`); its own errors name the file and table:
+    "PATH: key.field = value: ..." (an InputError) or "PATH: [key] ..." (any other)."""
+    fields = _fields(cls, values, path, key)
+    try:
+        return cls(**fields)
+    except InputError as err:
+        raise err.renamed(lambda field: f"{path}: {key}.{field}") from None
+    except ValueError as err:
+        raise ValueError(f"{path}: [{key}] {err}") from None
 
 
 def _coerce(value, annotation: str, path, key):

@@ -194,17 +194,24 @@ class _Keys:
         return value
 
     def texts(self, key, default=None) -> tuple[str, ...]:
+        """A non-empty list of names, none repeated (compared without case)."""
         value = self.get(key, default)
         if not isinstance(value, list) or not value or not all(
                 isinstance(v, (str, int)) and not isinstance(v, bool) for v in value):
             raise self._bad(key, value, "a non-empty list of names")
-        return tuple(str(v).strip() for v in value)
+        names = tuple(str(v).strip() for v in value)
+        check_unique(self.name(key), names, same=str.lower)
+        return names
 
-    def numbers(self, key, default=None, allowed: Range = Range()) -> tuple[float, ...]:
+    def numbers(self, key, default=None, allowed: Range = Range(),
+                unique: bool = True) -> tuple[float, ...]:
+        """A non-empty list of numbers in `allowed`, none repeated unless `unique` is off."""
         value = self.get(key, default)
         if not isinstance(value, list) or not value or not all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
             raise self._bad(key, value, "a non-empty list of numbers")
+        if unique:
+            check_unique(self.name(key), value)
         return check_each(self.name(key), value, allowed)
 
     def unknown(self, known) -> tuple[str, ...]:
@@ -242,11 +249,10 @@ def read_task_config(path: str | Path) -> PnnlTask:
     check_params(params, written.get)
     notes = [f"{key} = {keys.get(key)!r}: {why}" for key, why in _NOTED_TASK_KEYS.items()
              if key in keys.data]
-    p_mw = keys.numbers("actionBusesPValue") if "actionBusesPValue" in keys.data else None
+    p_mw = (keys.numbers("actionBusesPValue", unique=False)
+            if "actionBusesPValue" in keys.data else None)
     action = keys.texts("actionScopeAry")
-    check_unique(keys.name("actionScopeAry"), action)
     observed = keys.texts("observationScopeAry")
-    check_unique(keys.name("observationScopeAry"), observed)
     if len(ranges) not in (1, len(action)) and action_scope == "Bus":
         raise keys._bad("actionValueRanges", ranges, f"one pair, or one per action bus "
                         f"({len(action)})")

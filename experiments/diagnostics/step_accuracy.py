@@ -1,7 +1,7 @@
 """How accurate is a study's time step? Candidate (step, sweeps) pairs against a float64,
 small-step, many-sweep reference over the study's training tasks, without control.
 
-    python -m experiments.step_accuracy --study ieee39_fidvr [--dts 0.002 0.005 0.01]
+    python -m experiments.diagnostics.step_accuracy --study ieee39_fidvr [--dts 0.002 0.005 0.01]
         [--sweeps 2] [--coarse-dts 0 0.01] [--fine-window 1.0] [--coarse-sweeps K]
         [--motor-step rosenbrock] [--reference-dt 0.001] [--reference-sweeps 4]
         [--reference-precision float64] [--tasks train] [--episode S]
@@ -44,8 +44,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from baselines.controllers import no_control
-from experiments.studyargs import add_study_arguments, study_from_args
+from experiments.common.studyargs import add_study_arguments, study_from_args, summarised_notes
 from jaxgrid.env import MOTOR_STEPS
+from jaxgrid.episode import play
 from jaxgrid.rollouts import rollout_specs
 from jaxgrid.study import Study, rebuild
 
@@ -89,12 +90,12 @@ def shedding_stress(study: Study, env, rollouts: int, seed: int = 0) -> dict:
     tables = jnp.where(jax.random.uniform(share, shape) < STRESS_SHARE,
                        jax.random.uniform(draw, shape, minval=low, maxval=high), high)
 
-    def replay(table, obs, k):  # policy_apply: the table's row for agent step k
+    def replay(table, obs, k, inputs):  # a controller: the table's row for agent step k
         return table[k], k + 1
 
     def episodes(tables, grid, task, params):
-        return jax.vmap(lambda table: env.episode(replay, table, task, params, grid,
-                                                  jnp.zeros((), jnp.int32)))(tables)
+        return jax.vmap(lambda table: play(env, replay, table, task, params, grid,
+                                           jnp.zeros((), jnp.int32)))(tables)
 
     with jax.enable_x64(env.precision == "float64"):
         out = jax.jit(episodes)(tables, grid, task, params)
@@ -118,12 +119,14 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
              stress_rollouts: int = 64) -> dict:
     """The report of the module docstring as a dict; a coarse step of 0 means none."""
     episode = episode or study.config.episode
-    reference = rebuild(study, precision=reference_precision, sweeps=reference_sweeps)
+    with summarised_notes():
+        reference = rebuild(study, precision=reference_precision, sweeps=reference_sweeps)
     vm_ref, ok_ref, _ = run(reference, reference_dt, episode, tasks)
     check = check_index(study, tasks, study.config.agent_dt, vm_ref.shape[1])
     rows = []
     for n_sweeps in sweeps:
-        candidate_study = rebuild(study, precision="float32", sweeps=n_sweeps)
+        with summarised_notes():
+            candidate_study = rebuild(study, precision="float32", sweeps=n_sweeps)
         for dt, coarse in itertools.product(dts, coarse_dts):
             if coarse and coarse <= dt:
                 continue
@@ -172,7 +175,7 @@ def accurate(row: dict) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m experiments.step_accuracy",
+    p = argparse.ArgumentParser(prog="python -m experiments.diagnostics.step_accuracy",
                                 description=__doc__.split("\n")[0])
     add_study_arguments(p, "ieee39_fidvr")
     p.add_argument("--dts", nargs="+", type=float, default=[0.002, 0.005, 0.01],

@@ -1,13 +1,12 @@
-"""Reference trajectories from ANDES (CURENT, PyPI `andes`) for the same case, fault and horizon.
+"""ANDES (CURENT, PyPI `andes`) beside jaxgrid: a run of the same RAW and DYR files with one
+bus fault (`run_andes`), the DYR without what ANDES does not read (`write_psse_dyr`), and the
+errors of a jaxgrid trajectory against it (`trajectory_errors`). Used by the validation tests,
+the simulation benchmark and the command `experiments.reference.andes`.
 
-Used by the validation tests and by the simulation benchmark; as a command it prints the
-errors of this project's simulator against ANDES for one case and fault:
-
-    python -m experiments.andes_reference --raw R --dyr D --fault-bus B [--drop IEEEST ST2CUT]
- ANDES reads the same PSS/E
-RAW and DYR files; its `Toggle` records are not part of PSS/E and must not be in the DYR.
-ANDES converts constant-power loads to constant impedance in time-domain simulation by
-default (`PQ.config.p2z = q2z = 1`), which matches `LoadSplit()`'s default.
+ANDES reads the same PSS/E RAW and DYR files; its `Toggle` records are not part of PSS/E and
+must not be in the DYR. ANDES converts constant-power loads to constant impedance in
+time-domain simulation by default (`PQ.config.p2z = q2z = 1`), which matches `LoadSplit()`'s
+default.
 """
 from __future__ import annotations
 
@@ -122,40 +121,3 @@ def trajectory_errors(model, traj, ref: AndesRun, event_times, settle: float = 0
     return Errors(v_max=float(v_err.max()), v_rms=float(np.sqrt(np.mean(v_err ** 2))),
                   speed=float(speed_err[keep].max()),
                   angle_deg=float(np.degrees(np.abs(rel[keep]).max())))
-
-
-def main(argv=None) -> None:
-    import argparse
-    import os
-    import tempfile
-
-    from jaxgrid.compile import CompileOptions, compile_model
-    from jaxgrid.io.dyr import read_dyr
-    from jaxgrid.io.raw import read_raw
-    from jaxgrid.powerflow import PowerFlowOptions, solve
-    from jaxgrid.simulate import FaultEvent, simulate
-
-    parser = argparse.ArgumentParser(description="errors against ANDES for one bus fault")
-    parser.add_argument("--raw", required=True)
-    parser.add_argument("--dyr", required=True)
-    parser.add_argument("--fault-bus", type=int, required=True)
-    parser.add_argument("--fault-start", type=float, default=1.0)
-    parser.add_argument("--fault-duration", type=float, default=0.1)
-    parser.add_argument("--t-end", type=float, default=10.0)
-    parser.add_argument("--dt", type=float, default=0.005)
-    parser.add_argument("--drop", nargs="*", default=(), help="models removed for both tools")
-    args = parser.parse_args(argv)
-    dyr = write_psse_dyr(args.dyr, os.path.join(tempfile.mkdtemp(), "case.dyr"), tuple(args.drop))
-    ref = run_andes(args.raw, dyr, args.t_end, args.fault_bus, args.fault_start,
-                    args.fault_duration, tstep=args.dt)
-    case = read_raw(args.raw)  # ANDES's power flow does not enforce Q limits; match it
-    model = compile_model(case, read_dyr(dyr), CompileOptions(strict=False),
-                          pf=solve(case, PowerFlowOptions(enforce_q_limits=False)))
-    fault = FaultEvent(args.fault_bus, args.fault_start, args.fault_duration)
-    traj = simulate(model, args.t_end, args.dt, fault=fault)
-    errors = trajectory_errors(model, traj, ref, (fault.start, fault.start + fault.duration))
-    print(f"{args.raw}: {errors}, ANDES TDS {ref.wall_s:.2f} s, diverged {bool(traj.diverged)}")
-
-
-if __name__ == "__main__":
-    main()

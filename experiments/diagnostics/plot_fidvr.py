@@ -1,7 +1,7 @@
 """Draw fault-induced delayed voltage recovery on a study (built-in, file or RAW + DYR).
 
-    python -m experiments.plot_fidvr --study ieee39_fidvr --fault-bus 4 --fault-duration 0.08 \
-        [--point 0] --out fidvr.png
+    python -m experiments.diagnostics.plot_fidvr --study ieee39_fidvr --fault-bus 4 \
+        --fault-duration 0.08 [--point 0] --out fidvr.png
 
 The motor-data readings (`MotorOptions`) are the study's compile settings ([compile.motors]
 of a study file).
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.studyargs import add_study_arguments, study_from_args
+from experiments.common.studyargs import add_study_arguments, study_from_args
 from jaxgrid.study import write_study
 from jaxgrid.models.acmotor import Acmtblu1, motor_status
 from jaxgrid.recovery import envelope
@@ -26,7 +26,7 @@ from jaxgrid.simulate import FaultEvent, simulate
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m experiments.plot_fidvr",
+    p = argparse.ArgumentParser(prog="python -m experiments.diagnostics.plot_fidvr",
                                 description=__doc__.split("\n")[0])
     add_study_arguments(p, "ieee39_fidvr")
     p.add_argument("--point", type=int, default=0, help="operating point index (default 0)")

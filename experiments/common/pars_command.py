@@ -1,0 +1,117 @@
+"""The PARS training commands' flags, one per `experiments.common.training.Choices` field,
+and their run: `experiments.train`, `experiments.train_39bus` and `experiments.train_300bus`
+differ only in their study and iterations (`training.COMMANDS`)."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import jax
+
+from experiments.common.studyargs import add_study_arguments, study_from_args
+from experiments.common.training import (COMMANDS, PAPER_PRESETS, TASKS_PER_ITERATION, Choices,
+                                         train_study)
+
+SMALL, LARGE = PAPER_PRESETS["small"], PAPER_PRESETS["large"]
+
+
+def parser(command: str) -> argparse.ArgumentParser:
+    """The flags of training command `command` (a `COMMANDS` key)."""
+    defaults = COMMANDS[command]
+    study = defaults["study"]
+    p = argparse.ArgumentParser(prog=f"python -m experiments.{command}",
+                                description=f"PARS training on {study or 'a study'}")
+    add_study_arguments(p, study)
+    paper = "(default: the paper's for the grid's size, {} up to 100 buses, else {})".format
+    p.add_argument("--policy", default="lstm", choices=["linear", "fnn", "lstm"])
+    p.add_argument("--hidden", type=widths,
+                   help="layer widths, e.g. 32,32 " + paper(_csv(SMALL["hidden"]),
+                                                            _csv(LARGE["hidden"]))
+                   + "; a linear policy has none")
+    p.add_argument("--obs-clip", type=float,
+                   help="clip the policy's normalised inputs to ± this many standard "
+                        "deviations (default: no clip, as the paper)")
+    p.add_argument("--history", type=int,
+                   help="observations stacked (default: the study's for the policy kind, "
+                        "[training] history; the PNNL study files give 10 for linear and FNN, "
+                        "1 for LSTM policies)")
+    p.add_argument("--directions", type=int,
+                   help="N " + paper(SMALL["directions"], LARGE["directions"]))
+    p.add_argument("--top", type=int, help="b (default: N/2, as the paper)")
+    p.add_argument("--step-size", type=float, default=1.0, help="α")
+    p.add_argument("--noise", type=float, default=2.0, help="ν")
+    p.add_argument("--decay", type=float, help="ε " + paper(SMALL["decay"], LARGE["decay"]))
+    p.add_argument("--tasks-per-iteration", type=int,
+                   help=f"m (default {TASKS_PER_ITERATION}, or every task of the set if it "
+                        "has fewer)")
+    p.add_argument("--task-batch", type=int_or_auto, default="auto",
+                   help="tasks whose rollouts run as one batch, or 'auto' (default: all m on "
+                        "a GPU, else one on grids of more than 100 buses and all m on "
+                        "smaller ones); batches run one after another and stop once all "
+                        "their episodes are done")
+    p.add_argument("--compact-after", default="auto",
+                   help="agent steps after which the episodes still running in a batch "
+                        "continue regrouped, so episodes that ended stop costing: 'check' "
+                        "(the step of the task set's last recovery check, after which failed "
+                        "episodes have stopped), a number, 'off', or 'auto' (default: 'check' "
+                        "on grids of more than 100 buses, else 'off': measured faster on the "
+                        "PNNL 300-bus on CPUs and a GPU, slower on the 39-bus)")
+    p.add_argument("--compact-chunks", type=int, default=4,
+                   help="the episodes still running continue in chunks of 1/K of a batch, "
+                        "as many as they fill")
+    p.add_argument("--task-set", default="train", help="the study's task set to train on")
+    p.add_argument("--task-sampling", choices=["uniform", "stratified"],
+                   help="m distinct tasks uniformly, or k buses × k' durations as the paper "
+                        "(default: the study's [training] task_sampling)")
+    p.add_argument("--iterations", type=int, default=defaults["iterations"],
+                   help="total iterations of the run (with --resume: continue up to it)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seeds", type=int,
+                   help="K independent trainings (seeds --seed ... --seed + K − 1) vmapped "
+                        "into one compiled program; metrics per seed, policies in seedI/")
+    p.add_argument("--episode", type=float, help="episode length, s (default: the study's)")
+    p.add_argument("--out", default=f"runs/{study or 'study'}", help="output folder")
+    p.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
+    p.add_argument("--checkpoint-every", type=int, default=10, help="K iterations")
+    p.add_argument("--distributed", action="store_true",
+                   help="multi-host: join a jax.distributed cluster; without the next three "
+                        "flags the cluster environment (Slurm, Open MPI, TPU) supplies them")
+    p.add_argument("--coordinator", help="multi-host: coordinator address HOST:PORT")
+    p.add_argument("--num-processes", type=int, help="multi-host: number of processes")
+    p.add_argument("--process-id", type=int, help="multi-host: this process's index")
+    return p
+
+
+def run(argv: list[str] | None, command: str) -> int:
+    """Training command `command` with the flags `argv`: `train_study` of their `Choices`
+    on their study (a resumed run's own study.toml without --study); 2 and the error on
+    stderr for bad input."""
+    args = parser(command).parse_args(argv)
+    if args.distributed or args.coordinator or args.num_processes:
+        jax.distributed.initialize(args.coordinator, args.num_processes, args.process_id)
+    try:
+        saved_study = Path(args.out) / "study.toml"
+        study = study_from_args(args, str(saved_study) if args.resume and saved_study.is_file()
+                                else None)
+        names = {f.name for f in dataclasses.fields(Choices)}
+        train_study(study, Choices(**{k: v for k, v in vars(args).items() if k in names}))
+    except (ValueError, KeyError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def int_or_auto(value: str) -> int | str:
+    """A flag's value: 'auto' or a whole number."""
+    return value if value == "auto" else int(value)
+
+
+def widths(hidden: str) -> tuple[int, ...]:
+    """Layer widths of a --hidden value, e.g. "32,32" -> (32, 32); "" -> ()."""
+    return tuple(int(h) for h in str(hidden).split(",") if h.strip())
+
+
+def _csv(values) -> str:
+    return ",".join(map(str, values))
