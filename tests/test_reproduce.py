@@ -342,12 +342,18 @@ def test_a_gpu_trains_every_task_in_one_batch_in_the_cpu_runs_folder(study_file,
     """On a GPU a PARS training runs all m tasks in one batch, whatever the preset's task
     batch (a speed setting); its run folder keeps the CPU run's name, so either resumes the
     other's checkpoint."""
+    from experiments.common.training import PAPER_PRESETS, train_config
+
+    monkeypatch.setitem(PAPER_PRESETS, "small", {**PAPER_PRESETS["small"], "task_batch": 1})
     runs = Runs(str(study_file), tmp_path, QUICK)
-    runs.preset = {**runs.preset, "task_batch": 1}
     on_cpu = runs.pars_folder("lstm", 2)
-    assert runs.pars_config("lstm", 2)[0].pars.task_batch == 1
+
+    def task_batch():
+        return train_config(runs.study, runs.pars_choices("lstm", 2)).pars.task_batch
+
+    assert task_batch() == 1
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
-    assert runs.pars_config("lstm", 2)[0].pars.task_batch is None
+    assert task_batch() is None
     assert runs.pars_folder("lstm", 2) == on_cpu
 
 
