@@ -12,7 +12,7 @@ import jax
 
 from experiments.common.studyargs import add_study_arguments, study_from_args
 from experiments.common.training import (COMMANDS, PAPER_PRESETS, TASKS_PER_ITERATION, Choices,
-                                         train_study)
+                                         train_study, widths)
 
 SMALL, LARGE = PAPER_PRESETS["small"], PAPER_PRESETS["large"]
 
@@ -106,11 +106,6 @@ def run(argv: list[str] | None, command: str) -> int:
 def int_or_auto(value: str) -> int | str:
     """A flag's value: 'auto' or a whole number."""
     return value if value == "auto" else int(value)
-
-
-def widths(hidden: str) -> tuple[int, ...]:
-    """Layer widths of a --hidden value, e.g. "32,32" -> (32, 32); "" -> ()."""
-    return tuple(int(h) for h in str(hidden).split(",") if h.strip())
 
 
 def _csv(values) -> str:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from experiments.common.curves import ppo_curve
 from experiments.common.studyargs import add_study_arguments
+from experiments.common.training import widths
 
 # flag -> PPOConfig field (one-to-one; the defaults are PPOConfig's)
 FLAGS = {"envs": "envs", "rollout_steps": "rollout_steps", "epochs": "epochs",
@@ -64,7 +65,7 @@ def config_from_args(args):
     from baselines.ppo_train import PPOTrainConfig
 
     values = {field: getattr(args, flag) for flag, field in FLAGS.items()}
-    values["hidden"] = tuple(int(h) for h in str(args.hidden).split(",") if h.strip())
+    values["hidden"] = widths(args.hidden)
     return PPOTrainConfig(ppo=PPOConfig(**values), env_steps=args.env_steps,
                           eval_every=args.eval_every, task_set=args.task_set,
                           history=args.history, episode=args.episode, out=args.out,

@@ -108,6 +108,11 @@ def problem(study, choices: Choices = Choices()):
                             choices.task_set, choices.task_sampling)
 
 
+def widths(hidden: str) -> tuple[int, ...]:
+    """Layer widths of a --hidden value, e.g. "32,32" -> (32, 32); "" -> ()."""
+    return tuple(int(h) for h in str(hidden).split(",") if h.strip())
+
+
 def paper_preset(study) -> dict:
     """The `PAPER_PRESETS` entry for `study`'s grid size."""
     n_buses = len(study.points[0].case.buses.number)
