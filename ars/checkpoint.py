@@ -15,7 +15,7 @@ import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
-from ars.pars import TrainState
+from ars.iteration import TrainState
 from ars.policies import Policy, PolicySpec
 
 

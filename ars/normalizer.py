@@ -1,12 +1,17 @@
-"""Running mean and standard deviation of observations (ARS V2, Mania et al. 2018).
+"""Running mean and standard deviation of observations (ARS V2, Mania et al. 2018), and the
+policy that normalises its inputs by them (`normalized_policy`).
 
 Frozen during an iteration; afterwards the statistics of all its rollouts are merged in
 (Chan et al.'s parallel update), as Algorithm 1 of the PARS study does.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax.numpy as jnp
 from flax import struct
+
+from ars.policies import Policy
 
 STD_FLOOR = 1e-6  # below it a feature is treated as constant (scale 1)
 
@@ -60,3 +65,27 @@ def merge(stats: RunningStats, count, total, total_sq) -> RunningStats:
     return stats.replace(count=n, mean=stats.mean + delta * share,
                          m2=stats.m2 + batch_m2 + delta ** 2 * stats.count * share)
 
+
+
+def normalized_policy(policy: Policy, network: Callable = lambda fun: fun):
+    """policy_apply(params, obs, carry, inputs) with params = (θ, mean, std) that normalises
+    the observation and accumulates its sums (count, Σx, Σx²) in the carry; `inputs`, what
+    else the episode gives its controllers (e.g. `jaxgrid.episode.ControlInputs`), is unused.
+    The network runs as `network(policy.apply)`: the problem's wrap of a per-example network
+    (`ars.train.Problem.network`; default as it is)."""
+    net = network(policy.apply)
+
+    def apply(params, obs, carry, inputs):
+        theta, mean, std = params
+        net_carry, (count, total, total_sq) = carry
+        action, net_carry = net(theta, (obs - mean) / std, net_carry)
+        c, s, s2 = sums(obs)
+        return action, (net_carry, (count + c, total + s, total_sq + s2))
+
+    return apply
+
+
+def initial_carry(policy: Policy):
+    """The carry `normalized_policy` starts an episode with."""
+    n = policy.spec.obs_size
+    return policy.initial_carry(), (jnp.zeros(()), jnp.zeros(n), jnp.zeros(n))

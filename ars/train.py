@@ -1,9 +1,10 @@
-"""A PARS training run: `init_state`, then the jit-compiled iteration (`ars.pars`) in a Python
-loop that logs metrics, checkpoints, resumes and saves policies (the shape of google/brax's
+"""A PARS training run: `init_state`, then the jit-compiled iteration (`ars.iteration`: the
+PARS strategy `ars.pars.Pars` composed with the problem's `evaluate`) in a Python loop that
+logs metrics, checkpoints, resumes and saves policies (the shape of google/brax's
 `agents/ars/train.py`, with the loop on the host so that it can checkpoint).
 
 Any environment works: `train` takes a `Problem`, what the environment side supplies (for
-a grid study, `jaxgrid.rollouts.training_problem`). Output folder `TrainConfig.out`:
+a grid study, `jaxgrid.problem.training_problem`). Output folder `TrainConfig.out`:
   metrics.jsonl   one line per iteration: iteration, reward_mean, reward_max, wall_s, rollouts
                   (cumulative), env_steps (cumulative agent steps, where the episodes report
                   "steps"), device ("COUNT × KIND")
@@ -29,7 +30,9 @@ import jax
 import numpy as np
 
 from ars import checkpoint
-from ars.pars import ParsConfig, TrainState, init_state, make_iteration
+from ars.iteration import TrainState, default_mesh, make_iteration
+from ars.normalizer import initial_carry, normalized_policy
+from ars.pars import Pars, ParsConfig, init_state
 from ars.policies import Policy, PolicySpec
 
 
@@ -70,21 +73,18 @@ class Problem(Protocol):
     """What `train` needs from the environment side.
 
     Attributes:
-      episode: episode(policy_apply, policy_params, task, policy_carry, data) -> dict with
-        "reward" (), "policy_carry" and optionally "steps" () (`ars.pars.make_iteration`).
-        With `ParsConfig.compact_after` it must also run in two parts (`begin`, `resume`,
-        `done`, `result`: `jaxgrid.rollouts.PointEpisode`).
       tasks: pytree of the training tasks, leading axis n_tasks.
-      data: pytree the episode reads (passed to the compiled iteration, not closed over).
+      data: pytree the episodes read (passed to the compiled iteration, not closed over).
       obs_size: length of the policy's input.  action_size: length of its output.
       action_low, action_high: the action range.
       sampler: sampler(m) -> sample(key) -> (m,) task indices, or None (m distinct tasks
         drawn uniformly).
-      vmaps: how the rollouts are batched (`ars.pars.Vmaps` or an object with its fields).
+      network: network(fun) -> fun, how a per-example policy network `fun(θ, obs, carry)`
+        runs inside the problem's episodes (e.g. `jaxgrid.batching.batch_major`; the
+        identity where nothing is needed).
       info: JSON-able run information, saved with every checkpoint and policy.
     """
 
-    episode: Callable
     tasks: Any
     data: Any
     obs_size: int
@@ -92,8 +92,17 @@ class Problem(Protocol):
     action_low: float
     action_high: float
     sampler: Callable | None
-    vmaps: Any
+    network: Callable
     info: dict
+
+    def evaluator(self, apply: Callable, carry, mesh, *, task_batch: int | None,
+                  compact_after: int | None, compact_chunks: int) -> Callable:
+        """evaluate(thetas (P, size), shared, tasks (m, ...), data) -> dict of (P, m, ...)
+        episode results ("reward", "policy_carry", optionally "steps"): each θ's episodes
+        run the controller `apply(params, obs, carry, inputs)` with params (θ, *shared) and
+        `carry` at the start, the P vectors split over `mesh` and batched as the problem
+        sees fit (`ars.iteration.make_iteration`; `ParsConfig` says what the batching fields
+        ask for)."""
 
     def save(self, folder: Path) -> None:
         """Write what rebuilds the environment into the run folder (process 0, at start)."""
@@ -109,15 +118,19 @@ class Trainer(NamedTuple):
 
 
 def make_trainer(problem: Problem, config: TrainConfig, mesh=None) -> Trainer:
-    """The policy of `config` on the problem's sizes and its PARS iteration, the rollouts
-    sharded over `mesh` (default: all devices)."""
+    """The policy of `config` on the problem's sizes and its PARS iteration, the problem's
+    episodes sharded over `mesh` (default: all devices)."""
     spec = PolicySpec(config.policy, problem.obs_size, problem.action_size, config.hidden,
                       float(problem.action_low), float(problem.action_high), config.obs_clip)
-    policy = Policy(spec)
-    sample = (problem.sampler(config.pars.tasks_per_iteration)
+    policy, pars, mesh = Policy(spec), config.pars, mesh or default_mesh()
+    evaluate = problem.evaluator(normalized_policy(policy, problem.network),
+                                 initial_carry(policy), mesh, task_batch=pars.task_batch,
+                                 compact_after=pars.compact_after,
+                                 compact_chunks=pars.compact_chunks)
+    sample = (problem.sampler(pars.tasks_per_iteration)
               if problem.sampler is not None else None)
-    iteration = make_iteration(problem.episode, policy, config.pars, sample, mesh,
-                               config.seeds, problem.vmaps)
+    iteration = make_iteration(Pars(pars), evaluate, pars.tasks_per_iteration, sample, mesh,
+                               config.seeds)
     return Trainer(iteration, policy, spec)
 
 

@@ -9,11 +9,11 @@
 
 A saved policy is a folder of policy.json and policy.npz: policy.json holds "spec" (what
 rebuilds the network), "kind" (absent for PARS, "ppo" for PPO) and the run's information,
-among it "layout" (`jaxgrid.rollouts.layout`: the buses it observes and acts on, checked
+among it "layout" (`jaxgrid.problem.layout`: the buses it observes and acts on, checked
 against the study it is evaluated on) and "history"; policy.npz holds the arrays. A published
 network states its own layout by bus numbers (`baselines.rlgc_layouts`) and picks its inputs
 from the study's observation. `controller(spec, env)` gives (policy_apply, params, carry)
-for `jaxgrid.episode.rollout`; every policy_apply is a controller of its one signature,
+for `jaxgrid.episode.play_tasks`; every policy_apply is a controller of its one signature,
 policy_apply(params, obs, carry, inputs) -> (action, carry).
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from jaxgrid.env import LoadSheddingEnv
-from jaxgrid.rollouts import GRID_VMAPS, layout
+from jaxgrid.problem import GridProblem, layout
 from jaxgrid.study import Study
 
 SPECS = "none, uvls, mpc[:OPTIONS], policy:PATH, ppo:PATH or rlgc:FILE"
@@ -71,10 +71,10 @@ def check_layout(control: str, info: dict, study: Study, env: LoadSheddingEnv) -
 
 def pars_apply(policy):
     """policy_apply of a PARS `ars.policies.Policy` with its observation normaliser, the
-    network batched as in training (`jaxgrid.rollouts.GRID_VMAPS`)."""
-    from ars.pars import normalized_policy
+    network batched as in training (`jaxgrid.problem.GridProblem.network`)."""
+    from ars.normalizer import normalized_policy
 
-    return normalized_policy(policy, GRID_VMAPS.network)
+    return normalized_policy(policy, GridProblem.network)
 
 
 def controller(spec: str, env: LoadSheddingEnv, saved=None):
@@ -89,7 +89,7 @@ def controller(spec: str, env: LoadSheddingEnv, saved=None):
         from baselines.mpc import mpc_controller, parse_options
         return mpc_controller(env, parse_options(spec.removeprefix("mpc").removeprefix(":")))
     if spec.startswith("policy:"):
-        from ars.pars import initial_carry
+        from ars.normalizer import initial_carry
         policy, params, _ = saved or saved_policy(spec)
         _check_inputs(spec, policy.spec.obs_size, env)
         return pars_apply(policy), params, initial_carry(policy)

@@ -11,7 +11,7 @@ is one jittable controller of `jaxgrid.episode` that plans from the episode's st
 `plans = True`: the episode loop is a scan), so a test set is one compiled, vmapped program:
 
     planner, params, carry = mpc_controller(env, MpcOptions(horizon=1.0))
-    out = jaxgrid.episode.rollout(env, planner, params, tasks, env_params, grid, carry)
+    out = jaxgrid.episode.play_tasks(env, planner, params, tasks, env_params, grid, carry)
 
 The prediction model (choices, documented where they differ from the plant):
   * Gradient surrogate: stall, stall jump and restart of the motors are switches with zero
@@ -213,7 +213,7 @@ class Mpc:
 
 def mpc_controller(env: LoadSheddingEnv, options: MpcOptions | None = None):
     """(planner, MpcParams, initial plan of zeros (H, n_action)) for
-    `jaxgrid.episode.rollout` and `experiments.evaluate --controller mpc:...`."""
+    `jaxgrid.episode.play_tasks` and `experiments.evaluate --controller mpc:...`."""
     options = options or MpcOptions()
     planner = Mpc(env, options)
     real = np.float64 if env.precision == "float64" else np.float32

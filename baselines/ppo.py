@@ -64,7 +64,7 @@ from rejax.networks import GaussianPolicy
 
 from jaxgrid.env import EnvParams, EnvState, LoadSheddingEnv
 from jaxgrid.grid import GridModel
-from jaxgrid.rollouts import at_point
+from jaxgrid.problem import at_point
 from jaxgrid.study import Study
 from jaxgrid.tasks import PointTask
 
@@ -404,7 +404,7 @@ _APPLY: dict = {}
 
 def cached_apply(info: PolicyInfo):
     """`make_apply(info)`, one function per architecture, so repeated evaluations
-    (`jaxgrid.rollouts.rollout_specs` caches by function) reuse their compilation."""
+    (`jaxgrid.problem.play_specs` caches by function) reuse their compilation."""
     if info not in _APPLY:
         _APPLY[info] = make_apply(info)
     return _APPLY[info]

@@ -41,7 +41,7 @@ import numpy as np
 from ars import checkpoint
 from ars.train import device_label
 from baselines.ppo import PPOConfig, gymnax_env, make_ppo, ppo_policy, save_policy
-from jaxgrid.rollouts import layout, rollout_specs
+from jaxgrid.problem import layout, play_specs
 from jaxgrid.study import Study, write_study
 
 
@@ -174,7 +174,7 @@ def train_ppo(config: PPOTrainConfig, study: Study) -> PPOTrainResult:
         wall = time.perf_counter() - start
         done, wall_total = done + n, wall_total + wall
         apply, policy_params, carry = ppo_policy(state, algo)
-        _, evaluation = rollout_specs(study, env, apply, policy_params, specs, carry)
+        _, evaluation = play_specs(study, env, apply, policy_params, specs, carry)
         ended = int(np.sum(state.env_state.returns_count))
         row = {"iteration": done, "env_steps": done * ppo.batch, "wall_s": round(wall, 3),
                "device": device,

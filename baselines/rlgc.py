@@ -224,7 +224,7 @@ def rlgc_apply(policy: RlgcPolicy, env: LoadSheddingEnv):
 @dataclasses.dataclass(frozen=True)
 class _Apply:
     """`rlgc_apply`'s function; equal for equal structure, so evaluations of files of one
-    architecture share their compilation (`jaxgrid.rollouts.rollout_specs` caches by it)."""
+    architecture share their compilation (`jaxgrid.problem.play_specs` caches by it)."""
 
     network: RlgcNetwork
     picks: tuple[int, ...]

@@ -13,7 +13,7 @@ of the bus's initial load, once (latched). The study's settings:
 A relay is a relay: it acts whenever the voltage is low, before, during or after a fault.
 
     policy_apply, policy_params, carry = uvls_policy(env)
-    out = jaxgrid.episode.rollout(env, policy_apply, policy_params, tasks, EnvParams(), grid,
+    out = jaxgrid.episode.play_tasks(env, policy_apply, policy_params, tasks, EnvParams(), grid,
                                   carry)
 
 Time granularity. The relays run at the control step `env.config.agent_dt` (0.1 s in the

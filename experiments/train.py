@@ -9,7 +9,7 @@ built-in studies (`experiments.common.training.COMMANDS`). Every hyper-parameter
 one field each of `experiments.common.training.Choices`; where one is not given, the paper's
 setting for the study's grid size applies (Table I: the 39-bus column up to 100 buses, the
 300-bus one above), and `training.train_config` / `training.problem` turn them into
-`ars.train.TrainConfig` (the training loop) and `jaxgrid.rollouts.training_problem` (the
+`ars.train.TrainConfig` (the training loop) and `jaxgrid.problem.training_problem` (the
 study's side: --history, --episode, --task-set, --task-sampling). Each iteration draws
 m tasks of the study's training set across its operating points, uniformly or stratified
 (`--task-sampling`); all operating points share one compiled iteration. Output folder DIR:

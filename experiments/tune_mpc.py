@@ -20,14 +20,14 @@ from baselines.controllers import no_control
 from baselines.mpc import mpc_controller, parse_options
 from experiments.bench.timing import write_report
 from experiments.common.studyargs import add_study_arguments, study_from_args
-from jaxgrid.rollouts import rollout_specs
+from jaxgrid.problem import play_specs
 
 
 def failing_tasks(study, env, tasks: str, count: int):
     """Up to `count` specs of the set `tasks` that fail without shedding, evenly spread,
     the same number at every operating point."""
     apply, policy_params, carry = no_control(env)
-    specs, out = rollout_specs(study, env, apply, policy_params, study.tasks(tasks), carry)
+    specs, out = play_specs(study, env, apply, policy_params, study.tasks(tasks), carry)
     by_point = {}
     for spec, recovered in zip(specs, out["recovered"]):
         if not recovered:
@@ -53,7 +53,7 @@ def main(argv=None) -> None:
     for text in args.candidates:
         start = time.perf_counter()
         planner, mpc, plan = mpc_controller(env, parse_options(text))
-        _, out = rollout_specs(study, env, planner, mpc, specs, plan)
+        _, out = play_specs(study, env, planner, mpc, specs, plan)
         rows.append({"options": text or "defaults", "mean_reward": float(np.mean(out["reward"])),
                      "recovered": int(np.sum(out["recovered"])), "tasks": len(specs),
                      "shed_mw": float(np.sum(out["shed_pu"])) * study.base_mva,

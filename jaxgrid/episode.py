@@ -1,7 +1,7 @@
 """The episode loop of `jaxgrid.env.LoadSheddingEnv`: a controller acting every agent step.
 
-    out = rollout(env, controller, controller_params, tasks, params, grid, carry)  # vmapped
-    out = play(env, controller, controller_params, task, params, grid, carry)      # one task
+    out = play_tasks(env, controller, controller_params, tasks, params, grid, carry)  # vmapped
+    out = play(env, controller, controller_params, task, params, grid, carry)        # one task
 
 Every controller (a trained policy, the UVLS relays, the MPC) is called the same way:
 
@@ -14,7 +14,7 @@ MPC) runs in a `lax.scan` over every agent step, so its step index is not batche
 episodes are vmapped (a `lax.cond` on it stays a branch); every other controller runs in a
 `lax.while_loop` that stops once the episode (vmapped: every episode of the batch) is done.
 An episode can also run in parts, `result(run(..., run(..., start(...), k), n))`, between
-which a trainer regroups the episodes still running (`ars.pars`). The loop state is an
+which a trainer regroups the episodes still running (`jaxgrid.population`). The loop state is an
 `EpisodeLoop`; after `done` the reward stops and the controller's state is held (gymnax's
 `rollout` validity mask).
 """
@@ -103,7 +103,7 @@ def result(loop: EpisodeLoop) -> dict:
 
 def play(env: LoadSheddingEnv, controller, controller_params, task: Task, params: EnvParams,
          grid: GridModel, policy_carry=None, trace: bool = False) -> dict:
-    """One whole episode (un-batched; `rollout` vmaps it over tasks).
+    """One whole episode (un-batched; `play_tasks` vmaps it over tasks).
 
     `policy_carry` is the controller's initial state (None for feed-forward policies); it
     keeps its dtypes (a saved float32 policy runs in a float64 study). Without `trace`
@@ -126,8 +126,9 @@ def play(env: LoadSheddingEnv, controller, controller_params, task: Task, params
     return out
 
 
-def rollout(env: LoadSheddingEnv, controller, controller_params, tasks: Task,
-            params: EnvParams, grid: GridModel, policy_carry=None, trace: bool = False) -> dict:
+def play_tasks(env: LoadSheddingEnv, controller, controller_params, tasks: Task,
+               params: EnvParams, grid: GridModel, policy_carry=None,
+               trace: bool = False) -> dict:
     """`play` vmapped over a batch of tasks (leading axis) at one operating point `grid`; the
     controller is shared. Every entry of the returned dict gains a leading axis."""
     return vmap_minor(lambda task: play(env, controller, controller_params, task, params, grid,

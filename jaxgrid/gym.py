@@ -23,7 +23,7 @@ observation, action, reward, `terminated` (recovery failed or the simulation div
 and the PNNL PARS study: Huang et al., "Accelerated deep reinforcement learning based load
 shedding for emergency voltage control", 2022). `reset` and `step` are jitted once per
 instance; the host side converts to NumPy and Python types. For batched training stay with
-`jaxgrid.episode.rollout`: this adapter runs one episode at a time.
+`jaxgrid.episode.play_tasks`: this adapter runs one episode at a time.
 """
 from __future__ import annotations
 

@@ -335,8 +335,8 @@ def advance(model: GridModel, x: GridState, health: Health, t0, n: int, dt: floa
 
 
 @partial(jax.jit, static_argnames=("n_samples", "decimation", "dt", "bounds"))
-def rollout(model: GridModel, task: Task, n_samples: int, decimation: int, dt: float,
-            bounds: Bounds = Bounds()) -> Trajectory:
+def trajectory(model: GridModel, task: Task, n_samples: int, decimation: int, dt: float,
+               bounds: Bounds = Bounds()) -> Trajectory:
     """Simulate n_samples × decimation steps of dt seconds; sample every `decimation` steps."""
     fault = network.fault_view(model.network, task.fault_bus, task.fault_z)
     real = model.network.real_dtype
@@ -382,6 +382,6 @@ def simulate_batch(model: GridModel, tasks: Task, t_end: float, dt: float = 0.00
                    decimation: int = 1, bounds: Bounds = Bounds(), batched: bool = True):
     """Rollouts of a batch of tasks (leading axis on every Task field), vmapped."""
     n = _samples(t_end, dt, decimation)
-    run = partial(rollout, n_samples=n, decimation=decimation, dt=float(dt), bounds=bounds)
+    run = partial(trajectory, n_samples=n, decimation=decimation, dt=float(dt), bounds=bounds)
     with jax.enable_x64(model.precision == "float64"):
         return vmap_minor(run, in_axes=(None, 0))(model, tasks) if batched else run(model, tasks)

@@ -1,5 +1,7 @@
 """PARS: the update rule by hand, a known quadratic objective, the normaliser, guards,
-determinism and device counts, on toy episodes (nothing about grids)."""
+determinism and device counts, on toy episodes (nothing about grids), run as a trainer runs
+them (`ars.pars.Pars` composed with the episodes' batching and sharding,
+`jaxgrid.population.evaluator`); a second strategy (plain ES) through the same iteration."""
 from __future__ import annotations
 
 import jax
@@ -8,11 +10,14 @@ import numpy as np
 import pytest
 from jax.sharding import Mesh
 
+import ars.iteration
 from ars import normalizer
-from ars.normalizer import RunningStats
-from ars.pars import (ParsConfig, ars_update, clean_returns, init_state, initial_carry,
-                      make_iteration, normalized_policy)
+from ars.es import PlainEs
+from ars.iteration import clean_returns, default_mesh
+from ars.normalizer import RunningStats, initial_carry, normalized_policy
+from ars.pars import Pars, ParsConfig, ars_update, init_state
 from ars.policies import Policy, PolicySpec
+from jaxgrid.population import evaluator
 
 TARGETS = jnp.array([[-0.05, -0.15], [-0.10, -0.02], [-0.18, -0.08], [-0.12, -0.12]])
 
@@ -59,6 +64,17 @@ class ShortfallEpisode:
     @staticmethod
     def result(loop):
         return {"reward": loop[2], "policy_carry": loop[1], "steps": loop[0]}
+
+
+def make_iteration(episode, policy, config, sample=None, mesh=None, seeds=None,
+                   strategy=None):
+    """The iteration of `config` on toy episodes, composed as `ars.train.make_trainer` composes
+    it: `strategy` (default `Pars(config)`) and the episodes' evaluator."""
+    mesh = mesh or default_mesh()
+    evaluate = evaluator(episode, normalized_policy(policy), initial_carry(policy), mesh,
+                         config.task_batch, config.compact_after, config.compact_chunks)
+    return ars.iteration.make_iteration(strategy or Pars(config), evaluate,
+                                        config.tasks_per_iteration, sample, mesh, seeds)
 
 
 def test_update_equals_the_hand_computed_one():
@@ -279,8 +295,8 @@ def test_bad_hyper_parameters_are_named(quadratic):
     iteration = make_iteration(quadratic_episode, policy, ParsConfig(tasks_per_iteration=5))
     with pytest.raises(ValueError, match="tasks_per_iteration = 5: only 4 tasks"):
         iteration(init_state(policy, config), TARGETS, 1.0)
-    with pytest.raises(ValueError, match="2·directions = 6 perturbed policies do not split "
-                                         "over 4 devices"):
+    with pytest.raises(ValueError, match=r"6 parameter vectors \(the strategy's population\) "
+                                         "do not split over 4 devices"):
         make_iteration(quadratic_episode, policy, ParsConfig(directions=3, top=1),
                        mesh=Mesh(np.array(jax.devices()[:1] * 4).reshape(4), ("batch",)))
 
@@ -321,3 +337,20 @@ def test_env_steps_count_the_steps_each_episode_reports(quadratic):
     _, metrics = make_iteration(quadratic_episode, policy, config)(
         init_state(policy, config), TARGETS, 1.0)
     assert "env_steps" not in metrics, "an episode without steps reports none"
+
+
+def test_a_second_strategy_is_a_new_file_run_by_the_same_iteration(quadratic):
+    """Plain ES (`ars.es.PlainEs`, a file of its own: nothing of the iteration, the problem
+    or PARS edited for it) composed with the same evaluator removes most of the quadratic's
+    initial loss, as PARS does (`test_ars_improves_a_quadratic_objective`), and keeps α."""
+    policy, config = quadratic
+    run = make_iteration(quadratic_episode, policy, config, strategy=PlainEs(pairs=8))
+    state = init_state(policy, config)
+    start = _objective(policy, state)
+    for _ in range(60):
+        state, metrics = run(state, TARGETS, 1.0)
+    end = _objective(policy, state)
+    print(f"\nplain ES on the quadratic: reward of θ {start:.3f} -> {end:.3f} (optimum 0)")
+    assert end > 0.2 * start, "plain ES should remove most of the initial loss"
+    assert float(state.step_size) == pytest.approx(config.step_size)
+    assert int(metrics["rollouts"]) == 16 * config.tasks_per_iteration

@@ -17,7 +17,7 @@ import pytest
 from jaxgrid.env import (EnvParams, envelope_deviation, invalid_requests, normal_requests,
                          prefault_requests, recovery_failed, shed_power)
 from jaxgrid.recovery import mask_allows, normal_operation
-from jaxgrid.episode import rollout
+from jaxgrid.episode import play_tasks
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 from jaxgrid.study import builtin
 
@@ -195,7 +195,7 @@ def shed_after_fault(params, obs, carry, inputs):
 
 @pytest.fixture(scope="module")
 def episodes(env, grid, tasks):
-    run = jax.jit(functools.partial(rollout, env), static_argnums=0)
+    run = jax.jit(functools.partial(play_tasks, env), static_argnums=0)
     batch = stack_tasks(tasks)
     return {name: run(policy, None, batch, EnvParams(), grid, jnp.zeros((3,), jnp.int32))
             for name, policy in (("none", zero_policy), ("shed", shed_after_fault))}, run
@@ -287,7 +287,7 @@ def test_a_policy_s_stopping_loop_equals_a_planner_s_full_scan(episodes, env, gr
     which ignores them. The results are the same (to float32 rounding: the two loops are
     compiled apart; here they agree bitwise)."""
     batched, _ = episodes
-    traced = jax.jit(functools.partial(rollout, env), static_argnums=(0, 6))(
+    traced = jax.jit(functools.partial(play_tasks, env), static_argnums=(0, 6))(
         ShedAtStep(), None, stack_tasks(tasks), EnvParams(), grid,
         jnp.zeros((3,), jnp.int32), True)
     for key in ("steps", "recovered", "policy_carry"):
@@ -340,7 +340,7 @@ def test_coarse_step_keeps_the_verdicts_and_rewards(episodes, study, grid, tasks
     voltage errors of a few 1e-3 p.u., `experiments.diagnostics.step_accuracy`)."""
     fine = episodes[0]["shed"]
     env = study.env(episode=6.0, coarse_dt=0.01, fine_window=1.0)
-    coarse = jax.jit(functools.partial(rollout, env), static_argnums=0)(
+    coarse = jax.jit(functools.partial(play_tasks, env), static_argnums=0)(
         shed_after_fault, None, stack_tasks(tasks), EnvParams(), grid,
         jnp.zeros((3,), jnp.int32))
     print("\nrewards, fine and coarse:", np.asarray(fine["reward"]).round(2),
@@ -353,7 +353,7 @@ def test_coarse_step_keeps_the_verdicts_and_rewards(episodes, study, grid, tasks
 def test_a_float32_policy_state_runs_in_a_float64_study(study):
     """A saved policy's LSTM state is float32; in a float64 study (`[compile] precision`) its
     update is promoted to float64, and the episode loop must keep the state's dtype."""
-    from jaxgrid.rollouts import rollout_specs
+    from jaxgrid.problem import play_specs
     from jaxgrid.study.build import rebuild
     from jaxgrid.tasks import TaskSpec
 
@@ -364,7 +364,7 @@ def test_a_float32_policy_state_runs_in_a_float64_study(study):
     def apply(params, obs, carry, inputs):  # counts the observations' sum in its state
         return jnp.zeros(n_action, obs.dtype), carry + jnp.sum(obs)
 
-    _, out = rollout_specs(study64, env, apply, None, [TaskSpec(4, 0.0)],
+    _, out = play_specs(study64, env, apply, None, [TaskSpec(4, 0.0)],
                            jnp.zeros((), jnp.float32))
     assert out["policy_carry"].dtype == np.float32
     assert np.isfinite(out["policy_carry"]).all() and out["policy_carry"][0] != 0.0

@@ -1,5 +1,5 @@
 """The Gymnasium adapter: registration, Gymnasium's own env checker, and one episode against
-the functional environment's `jaxgrid.episode.rollout`.
+the functional environment's `jaxgrid.episode.play_tasks`.
 
 The 39-bus env runs 6 s episodes (the fault at 1 s and the 4 s recovery check still fit) and is
 built once for the module; the 300-bus env is only made, reset and stepped once.
@@ -17,7 +17,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from jaxgrid.env import EnvParams
-from jaxgrid.episode import rollout
+from jaxgrid.episode import play_tasks
 from jaxgrid.gym import ENV_IDS, LoadSheddingGymEnv  # registers the ids
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 from jaxgrid.study import builtin
@@ -106,7 +106,7 @@ def test_zero_action_fidvr_episode_terminates_like_rollout(env39):
 
     grid = env39.study.point(0)
     batch = stack_tasks([make_task(grid, FIDVR_FAULT)])
-    out = jax.jit(functools.partial(rollout, env39.env), static_argnums=0)(
+    out = jax.jit(functools.partial(play_tasks, env39.env), static_argnums=0)(
         zero_policy, None, batch, EnvParams(), grid)
     assert int(out["steps"][0]) == steps and not bool(out["recovered"][0])
     assert total == pytest.approx(float(out["reward"][0]), rel=REWARD_RTOL)

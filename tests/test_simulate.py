@@ -17,8 +17,8 @@ from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.powerflow import PowerFlowOptions, solve
-from jaxgrid.simulate import (FaultEvent, LoadChange, make_task, rollout, simulate, simulate_batch,
-                              stack_tasks)
+from jaxgrid.simulate import (FaultEvent, LoadChange, make_task, simulate, simulate_batch,
+                              stack_tasks, trajectory)
 from tests.conftest import andes_cases_dir
 
 T_END = 10.0
@@ -119,10 +119,10 @@ def test_one_task_diverges_the_rest_do_not(batch):
 
 def test_load_change_moves_voltage_and_no_retrace(batch):
     model, tasks, out = batch
-    before = rollout._cache_size()
+    before = trajectory._cache_size()
     simulate_batch(model, stack_tasks([tasks[1], tasks[0], tasks[3], tasks[2]]), 2.0, DT,
                    decimation=10)
-    assert rollout._cache_size() == before, "a new batch of tasks must not recompile"
+    assert trajectory._cache_size() == before, "a new batch of tasks must not recompile"
     t = np.asarray(out.t[3])
     bus = model.bus_index(7)
     vm = np.asarray(out.vm[3])[:, bus]

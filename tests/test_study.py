@@ -18,9 +18,9 @@ import pytest
 
 from baselines.controllers import no_control
 from jaxgrid.env import EnvParams
-from jaxgrid.episode import rollout
+from jaxgrid.episode import play_tasks
 from jaxgrid.io.raw import read_raw
-from jaxgrid.rollouts import at_point, rollout_specs, stratified_sampler
+from jaxgrid.problem import at_point, play_specs, stratified_sampler
 from jaxgrid.study import CompileSettings, builtin, from_files, read_study, write_study
 from jaxgrid.tasks import TaskSet, TaskSpec
 
@@ -77,8 +77,8 @@ def uncontrolled(pnnl39):
     env = study.env()
     apply, params, carry = no_control(env)
     specs = TaskSet((4, 15), (0.05, 0.08)).specs(study.n_points)
-    ordered, batch = rollout_specs(study, env, apply, params, specs, carry)
-    run = jax.jit(functools.partial(rollout, env), static_argnums=0)
+    ordered, batch = play_specs(study, env, apply, params, specs, carry)
+    run = jax.jit(functools.partial(play_tasks, env), static_argnums=0)
     per_point = []
     for k in range(study.n_points):
         mine = [s for s in ordered if s.operating_point == k]
@@ -106,7 +106,7 @@ def test_three_operating_points_one_compilation(uncontrolled):
 def test_pars_iteration_compiles_once_across_points_and_task_sets(pnnl39):
     from ars.pars import ParsConfig, init_state
     from ars.train import TrainConfig, make_trainer
-    from jaxgrid.rollouts import training_problem
+    from jaxgrid.problem import training_problem
 
     config = ParsConfig(directions=1, top=1, tasks_per_iteration=2)
     problem = training_problem(pnnl39, "linear", history=1, episode=0.5)
@@ -129,7 +129,7 @@ def test_regrouped_grid_episodes_equal_whole_ones(pnnl39, task_batch):
     episodes: the same steps and θ to float32 rounding (the chunks are other batch sizes)."""
     from ars.pars import ParsConfig, init_state
     from ars.train import TrainConfig, make_trainer
-    from jaxgrid.rollouts import training_problem
+    from jaxgrid.problem import training_problem
 
     problem = training_problem(pnnl39, "linear", history=1, episode=0.5)
     tasks = pnnl39.batch([TaskSpec(4, 0.05, 0.1, 0), TaskSpec(15, 0.08, 0.1, 2)])

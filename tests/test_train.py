@@ -191,7 +191,7 @@ def test_shaping_and_joined_task_sets_change_the_training_only(capsys):
     training episodes while the study (what evaluations and the saved study use) keeps its
     own; bad items name the flag."""
     from experiments.common.training import shaping
-    from jaxgrid.rollouts import training_problem
+    from jaxgrid.problem import training_problem
 
     study = builtin("ieee39_fidvr")
     weights = shaping(["c_normal=30", "c_shed=200"])

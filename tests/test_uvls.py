@@ -17,7 +17,7 @@ import pytest
 
 from baselines.uvls import UvlsParams, check_params, uvls_policy
 from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
-from jaxgrid.episode import rollout
+from jaxgrid.episode import play_tasks
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 from jaxgrid.study import builtin
 
@@ -197,7 +197,7 @@ def episodes(study, env):
     batch = stack_tasks([make_task(grid, f) for f in faults])
     policy_apply, params, carry = uvls_policy(env)
     off = params.replace(fractions=np.zeros_like(params.fractions))
-    run = jax.jit(functools.partial(rollout, env), static_argnums=(0, 6))
+    run = jax.jit(functools.partial(play_tasks, env), static_argnums=(0, 6))
     return {name: jax.tree.map(np.asarray, run(policy_apply, p, batch, EnvParams(), grid, carry,
                                                True))
             for name, p in (("uvls", params), ("none", off))}

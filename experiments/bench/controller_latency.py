@@ -10,7 +10,7 @@ import time
 import jax
 import jax.numpy as jnp
 
-from ars.pars import initial_carry
+from ars.normalizer import initial_carry
 from ars.policies import Policy, PolicySpec
 from baselines.controllers import pars_apply
 from baselines.mpc import mpc_controller, parse_options

@@ -3,7 +3,7 @@
     python -m experiments.bench.env [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
         [--batch-sizes 1 16 128 512] [--devices 1 2] [--out benchmarks/cpu/env.json]
 
-Each rollout is a whole 10 s episode (100 agent steps of 0.1 s) of `jaxgrid.episode.rollout`
+Each rollout is a whole 10 s episode (100 agent steps of 0.1 s) of `jaxgrid.episode.play_tasks`
 with a controller that never sheds, on training-set faults cycled over the batch; the batch
 axis is sharded over a 1-D mesh of CPU devices. Agent steps per second = batch × 100 / the
 best warm wall time.
@@ -18,7 +18,7 @@ import jax
 from baselines.controllers import no_control
 from experiments.bench.timing import sharded_timings, write_report
 from experiments.common.studyargs import load_study
-from jaxgrid.episode import rollout
+from jaxgrid.episode import play_tasks
 
 
 def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
@@ -28,7 +28,7 @@ def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
     env, grid = study.env(), study.point(0)
     specs = [s for s in study.tasks("train") if s.operating_point == 0]
     apply, params, carry = no_control(env)
-    run = jax.jit(functools.partial(rollout, env), static_argnums=0)
+    run = jax.jit(functools.partial(play_tasks, env), static_argnums=0)
     result = {"case": name, "dt_s": env.config.dt, "agent_steps": env.config.n_steps,
               "runs": []}
     for n_dev, batch, _, first, warm in sharded_timings(

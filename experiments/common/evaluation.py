@@ -14,7 +14,7 @@ import numpy as np
 from baselines.controllers import check_layout, controller, saved_policy
 from baselines.rlgc import training_log
 from jaxgrid.recovery import envelope
-from jaxgrid.rollouts import rollout_specs
+from jaxgrid.problem import play_specs
 from jaxgrid.study import Study
 from jaxgrid.study.sources import fault_set
 
@@ -53,7 +53,7 @@ def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
             print(f"{study.name} {point.label}: observed buses {list(unchecked)} sit below the "
                   "recovery level before any fault; the recovery check leaves them out")
     chosen = tasks if isinstance(tasks, list) else task_specs(study, tasks)
-    specs, out = rollout_specs(study, env, apply, policy_params, chosen, carry,
+    specs, out = play_specs(study, env, apply, policy_params, chosen, carry,
                                trace=plot_dir is not None)
     rows = [{"fault_bus": s.fault_bus, "fault_duration": s.fault_duration,
              "fault_start": s.fault_start, "operating_point": study.points[s.operating_point]

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import jax
 
+from ars.policies import KINDS
 from experiments.common.studyargs import add_study_arguments, study_from_args
 from experiments.common.training import (COMMANDS, PAPER_PRESETS, TASKS_PER_ITERATION, Choices,
                                          shaping, train_study, widths)
@@ -25,7 +26,7 @@ def parser(command: str) -> argparse.ArgumentParser:
                                 description=f"PARS training on {study or 'a study'}")
     add_study_arguments(p, study)
     paper = "(default: the paper's for the grid's size, {} up to 100 buses, else {})".format
-    p.add_argument("--policy", default="lstm", choices=["linear", "fnn", "lstm"])
+    p.add_argument("--policy", default=Choices.policy, choices=list(KINDS))
     p.add_argument("--hidden", type=widths,
                    help="layer widths, e.g. 32,32 " + paper(_csv(SMALL["hidden"]),
                                                             _csv(LARGE["hidden"]))
@@ -45,28 +46,28 @@ def parser(command: str) -> argparse.ArgumentParser:
     p.add_argument("--directions", type=int,
                    help="N " + paper(SMALL["directions"], LARGE["directions"]))
     p.add_argument("--top", type=int, help="b (default: N/2, as the paper)")
-    p.add_argument("--step-size", type=float, default=1.0, help="α")
-    p.add_argument("--noise", type=float, default=2.0, help="ν")
+    p.add_argument("--step-size", type=float, default=Choices.step_size, help="α")
+    p.add_argument("--noise", type=float, default=Choices.noise, help="ν")
     p.add_argument("--decay", type=float, help="ε " + paper(SMALL["decay"], LARGE["decay"]))
     p.add_argument("--tasks-per-iteration", type=int,
                    help=f"m (default {TASKS_PER_ITERATION}, or every task of the set if it "
                         "has fewer)")
-    p.add_argument("--task-batch", type=int_or_auto, default="auto",
+    p.add_argument("--task-batch", type=int_or_auto, default=Choices.task_batch,
                    help="tasks whose rollouts run as one batch, or 'auto' (default: all m on "
                         "a GPU, else one on grids of more than 100 buses and all m on "
                         "smaller ones); batches run one after another and stop once all "
                         "their episodes are done")
-    p.add_argument("--compact-after", default="auto",
+    p.add_argument("--compact-after", default=Choices.compact_after,
                    help="agent steps after which the episodes still running in a batch "
                         "continue regrouped, so episodes that ended stop costing: 'check' "
                         "(the step of the task set's last recovery check, after which failed "
                         "episodes have stopped), a number, 'off', or 'auto' (default: 'check' "
                         "on grids of more than 100 buses, else 'off': measured faster on the "
                         "PNNL 300-bus on CPUs and a GPU, slower on the 39-bus)")
-    p.add_argument("--compact-chunks", type=int, default=4,
+    p.add_argument("--compact-chunks", type=int, default=Choices.compact_chunks,
                    help="the episodes still running continue in chunks of 1/K of a batch, "
                         "as many as they fill")
-    p.add_argument("--task-set", default="train",
+    p.add_argument("--task-set", default=Choices.task_set,
                    help="the study's task set to train on, or several joined by '+' "
                         "(uniform sampling), e.g. train+train_extra")
     p.add_argument("--task-sampling", choices=["uniform", "stratified"],
@@ -78,14 +79,15 @@ def parser(command: str) -> argparse.ArgumentParser:
                         "c_prefault, unstable_penalty); evaluations keep the study's")
     p.add_argument("--iterations", type=int, default=defaults["iterations"],
                    help="total iterations of the run (with --resume: continue up to it)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=Choices.seed)
     p.add_argument("--seeds", type=int,
                    help="K independent trainings (seeds --seed ... --seed + K − 1) vmapped "
                         "into one compiled program; metrics per seed, policies in seedI/")
     p.add_argument("--episode", type=float, help="episode length, s (default: the study's)")
     p.add_argument("--out", default=f"runs/{study or 'study'}", help="output folder")
     p.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
-    p.add_argument("--checkpoint-every", type=int, default=10, help="K iterations")
+    p.add_argument("--checkpoint-every", type=int, default=Choices.checkpoint_every,
+                   help="K iterations")
     p.add_argument("--distributed", action="store_true",
                    help="multi-host: join a jax.distributed cluster; without the next three "
                         "flags the cluster environment (Slurm, Open MPI, TPU) supplies them")

@@ -2,7 +2,7 @@
 choices)` turns a study and what a user chose (`Choices`, one field per flag of
 `experiments.train`; None or "auto": the paper's setting for the study's grid size) into the
 `ars.train.TrainConfig`, and `problem(study, choices)` into the study's side
-(`jaxgrid.rollouts.training_problem`). The training commands, the reproduction harness and
+(`jaxgrid.problem.training_problem`). The training commands, the reproduction harness and
 the training benchmarks all use them; `train_study` runs one training.
 """
 from __future__ import annotations
@@ -20,18 +20,19 @@ from experiments.common.curves import pars_curve
 TASKS_PER_ITERATION = 9  # m when not chosen and the task set has as many
 LARGE_GRID = 100  # buses: larger grids get the paper's 300-bus settings
 
-# The paper's Table I per system: the 39-bus column for studies up to LARGE_GRID buses, else
-# the 300-bus one (N: the directions its main policy trained with; b = N/2). The large grids'
+# The paper's Table I per system: the 39-bus column for studies up to LARGE_GRID buses (the
+# defaults of ParsConfig and TrainConfig), else the 300-bus one (N: the directions its main
+# policy trained with; b = N/2). The large grids'
 # m tasks run one after another on CPUs (task_batch 1: 256 rollouts per batch, and a task's
 # batch stops once all its episodes have failed; measured on 2 CPU devices 1.17× faster per
 # iteration at θ = 0, 2.4× after the first update).
-PAPER_PRESETS = {"small": {"hidden": (32, 32), "decay": 0.99, "directions": 16,
-                           "task_batch": None},
+PAPER_PRESETS = {"small": {"hidden": TrainConfig.hidden, "decay": ParsConfig.decay,
+                           "directions": ParsConfig.directions, "task_batch": None},
                  "large": {"hidden": (64, 64), "decay": 0.996, "directions": 128,
                            "task_batch": 1}}
 
 # The study and iterations of each training command (`python -m experiments.NAME`).
-COMMANDS = {"train": {"study": None, "iterations": 200},
+COMMANDS = {"train": {"study": None, "iterations": TrainConfig.iterations},
             "train_39bus": {"study": "ieee39_fidvr", "iterations": 200},
             "train_300bus": {"study": "ieee300_fidvr", "iterations": 500}}
 
@@ -39,7 +40,9 @@ COMMANDS = {"train": {"study": None, "iterations": 200},
 @dataclasses.dataclass(frozen=True)
 class Choices:
     """What a user chose for a PARS training (`experiments.train`'s flags); None or "auto":
-    the paper's setting for the study's grid size (`paper_preset`) or the study's own.
+    the paper's setting for the study's grid size (`paper_preset`) or the study's own. The
+    other defaults are those of `ars.pars.ParsConfig` and `ars.train.TrainConfig` (read from
+    them, written once).
 
     Attributes:
       policy: "linear" | "fnn" | "lstm".  hidden: layer widths (linear: none).
@@ -57,30 +60,30 @@ class Choices:
       iterations, seeds, checkpoint_every, out, resume: as `ars.train.TrainConfig`.
     """
 
-    policy: str = "lstm"
+    policy: str = TrainConfig.policy
     hidden: tuple[int, ...] | None = None
-    obs_clip: float | None = None
-    obs_std_floor: float | None = None
+    obs_clip: float | None = TrainConfig.obs_clip
+    obs_std_floor: float | None = ParsConfig.obs_std_floor
     history: int | None = None
     directions: int | None = None
     top: int | None = None
-    step_size: float = 1.0
-    noise: float = 2.0
+    step_size: float = ParsConfig.step_size
+    noise: float = ParsConfig.noise
     decay: float | None = None
     tasks_per_iteration: int | None = None
     task_batch: int | str = "auto"
     compact_after: str = "auto"
-    compact_chunks: int = 4
+    compact_chunks: int = ParsConfig.compact_chunks
     task_set: str = "train"
     task_sampling: str | None = None
     shaping: tuple[tuple[str, float], ...] = ()
     episode: float | None = None
-    seed: int = 0
-    iterations: int = 200
-    seeds: int | None = None
-    checkpoint_every: int = 10
-    out: str = "runs/study"
-    resume: bool = False
+    seed: int = ParsConfig.seed
+    iterations: int = TrainConfig.iterations
+    seeds: int | None = TrainConfig.seeds
+    checkpoint_every: int = TrainConfig.checkpoint_every
+    out: str = TrainConfig.out
+    resume: bool = TrainConfig.resume
 
 
 def train_config(study, choices: Choices = Choices()) -> TrainConfig:
@@ -106,9 +109,9 @@ def train_config(study, choices: Choices = Choices()) -> TrainConfig:
 
 
 def problem(study, choices: Choices = Choices()):
-    """The study's side of the training: `jaxgrid.rollouts.training_problem` of the chosen
+    """The study's side of the training: `jaxgrid.problem.training_problem` of the chosen
     policy kind, history, episode, task set and sampling."""
-    from jaxgrid.rollouts import training_problem
+    from jaxgrid.problem import training_problem
 
     return training_problem(study, choices.policy, choices.history, choices.episode,
                             choices.task_set, choices.task_sampling, dict(choices.shaping))
@@ -165,11 +168,11 @@ def task_batch(setting: int | str, preset: int | None) -> int | None:
 def compact_after(setting: str, study, task_set: str = "train",
                   episode: float | None = None) -> int | None:
     """`ParsConfig.compact_after` of a --compact-after setting: 'check' is the task set's
-    last recovery check step (`jaxgrid.rollouts.recovery_check_step`), 'auto' is 'check' on
+    last recovery check step (`jaxgrid.problem.recovery_check_step`), 'auto' is 'check' on
     grids of the paper's large preset (`paper_preset`: more than LARGE_GRID buses) and 'off'
     on smaller ones; None for 'off' or a step not inside the episode (`episode` s, default
     the study's)."""
-    from jaxgrid.rollouts import recovery_check_step
+    from jaxgrid.problem import recovery_check_step
 
     if setting == "auto":
         setting = "check" if paper_preset(study) is PAPER_PRESETS["large"] else "off"

@@ -47,7 +47,7 @@ from baselines.controllers import no_control
 from experiments.common.studyargs import add_study_arguments, study_from_args, summarised_notes
 from jaxgrid.env import MOTOR_STEPS
 from jaxgrid.episode import play
-from jaxgrid.rollouts import rollout_specs
+from jaxgrid.problem import play_specs
 from jaxgrid.study import Study, rebuild
 
 ACCURACY_P99 = 1e-3  # p.u.: the largest p99 |ΔV| a study's default step may have
@@ -64,9 +64,9 @@ def run(study: Study, dt: float, episode: float, tasks: str, coarse_dt: float | 
                     coarse_sweeps=coarse_sweeps, motor_step=motor_step)
     apply, params, carry = no_control(env)
     specs = study.tasks(tasks)
-    rollout_specs(study, env, apply, params, specs, carry, trace=True)  # compile
+    play_specs(study, env, apply, params, specs, carry, trace=True)  # compile
     start = time.perf_counter()
-    _, out = rollout_specs(study, env, apply, params, specs, carry, trace=True)
+    _, out = play_specs(study, env, apply, params, specs, carry, trace=True)
     return out["vm"], out["recovered"], time.perf_counter() - start
 
 

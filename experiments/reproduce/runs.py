@@ -30,7 +30,7 @@ from experiments.common.studyargs import load_study
 from experiments.common.curves import SMOOTHING, smoothed
 from experiments.common.training import (Choices, paper_preset, problem, train_config,
                                          train_study)
-from jaxgrid.rollouts import rollout_specs
+from jaxgrid.problem import play_specs
 from jaxgrid.study import Study, write_study
 
 REPO = Path(__file__).resolve().parents[2]
@@ -315,7 +315,7 @@ class Runs:
             return json.loads(path.read_text())
         env, apply, params, carry = controlled_env(self.study, self._spec(control))
         task = TaskSpec(fault_bus, duration, self.study.task_set("test").fault_starts[0])
-        _, out = rollout_specs(self.study, env, apply, params, [task], carry, trace=True)
+        _, out = play_specs(self.study, env, apply, params, [task], carry, trace=True)
         steps = out["vm"].shape[1]
         result = {"t": ((np.arange(steps) + 1) * env.config.agent_dt).tolist(),
                   "vm": out["vm"][0].tolist(),

@@ -10,7 +10,7 @@
 A `Study` holds its `StudyDefinition` (everything that rebuilds it, serialisable to TOML),
 the operating points (solved cases of one grid) and their compiled models stacked into
 one `GridModel` pytree with a leading operating-point axis (`models`). That pytree is data:
-it is passed to compiled functions as an argument (`jaxgrid.rollouts.at_point` selects a
+it is passed to compiled functions as an argument (`jaxgrid.problem.at_point` selects a
 point inside jit), so one compilation serves every operating point of the grid.
 
 Built three ways:

@@ -115,7 +115,7 @@ class TrainingSettings:
     Attributes:
       history: {policy kind: observations stacked}; a kind not named stacks env.history.
       task_sampling: "uniform" (m distinct tasks) or "stratified"
-        (`jaxgrid.rollouts.stratified_sampler`).
+        (`jaxgrid.problem.stratified_sampler`).
     """
 
     history: dict = dataclasses.field(default_factory=dict)

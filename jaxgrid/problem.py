@@ -1,13 +1,13 @@
-"""The grid side of training and evaluation: episodes at a study's operating points.
+"""A study as a training problem, and its episodes at the study's operating points.
 
 `at_point` picks an operating point of the stacked models inside jit; `PointEpisode` is the
-episode a trainer rolls out (`ars.pars.make_iteration`); `stratified_sampler` draws tasks
-as the PNNL PARS study does; `training_problem` bundles what `ars.train.train` needs from a
-study (its tasks, the models, the sizes, and `GRID_VMAPS`: rollouts batched with the batch
-as every array's minor axis, `jaxgrid.batching`); `rollout_specs` runs a controller on any
-tasks of a study in one compiled call (evaluation); `recovery_check_step` is where a
-trainer regroups the episodes still running. Nothing here imports `ars`: the trainer's
-types are met by their fields.
+episode a trainer runs per parameter vector and task; `stratified_sampler` draws tasks as the
+PNNL PARS study does; `training_problem` bundles what `ars.train.train` needs from a study
+(`GridProblem`: its tasks, the models, the sizes, and its `evaluator`, which runs a
+population of policies on them batched and sharded: `jaxgrid.population`); `play_specs`
+runs a controller on any tasks of a study in one compiled call (evaluation);
+`recovery_check_step` is where a trainer regroups the episodes still running. Nothing here
+imports `ars`: the trainer's types are met by their fields.
 """
 from __future__ import annotations
 
@@ -15,14 +15,13 @@ import dataclasses
 import functools
 from collections.abc import Callable
 from pathlib import Path
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid import episode
-from jaxgrid.batching import batch_major, vmap_minor
+from jaxgrid import episode, population
+from jaxgrid.batching import batch_major
 from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
 from jaxgrid.grid import GridModel
 from jaxgrid.study import Study, write_study
@@ -42,9 +41,10 @@ def at_point(models: GridModel, point) -> GridModel:
 @dataclasses.dataclass(frozen=True)
 class PointEpisode:
     """`jaxgrid.episode.play` at the task's operating point of stacked `models` (for
-    `ars.pars`): `episode(policy_apply, policy_params, task: PointTask, policy_carry, models)
-    -> dict`, or in two runs, `result(resume(..., begin(..., steps)))`, between which the
-    trainer regroups the episodes still running (`ars.pars.ParsConfig.compact_after`)."""
+    `jaxgrid.population`): `episode(policy_apply, policy_params, task: PointTask,
+    policy_carry, models) -> dict`, or in two runs, `result(resume(..., begin(..., steps)))`,
+    between which the episodes still running are regrouped
+    (`ars.pars.ParsConfig.compact_after`)."""
 
     env: LoadSheddingEnv
     params: EnvParams
@@ -71,36 +71,36 @@ class PointEpisode:
     result = staticmethod(episode.result)
 
 
-def rollout_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
-                  policy_carry=None, trace: bool = False):
+def play_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
+               policy_carry=None, trace: bool = False):
     """Every task of `specs` in one compiled call: a vmap over their operating points (models
-    batched) of `jaxgrid.episode.rollout` over each point's tasks (one model shared).
+    batched) of `jaxgrid.episode.play_tasks` over each point's tasks (one model shared).
 
     Every operating point of `specs` must have the same number of tasks (task sets do).
-    Returns (specs in the order of the results, `rollout`'s dict with a leading axis).
+    Returns (specs in the order of the results, `play`'s dict with a leading axis).
     """
     points = sorted({s.operating_point for s in specs})
     groups = [[s for s in specs if s.operating_point == p] for p in points]
     if len({len(g) for g in groups}) != 1:
-        raise ValueError("rollout_specs: every operating point needs the same number of tasks")
+        raise ValueError("play_specs: every operating point needs the same number of tasks")
     ordered = [s for g in groups for s in g]
     shape = (len(points), len(groups[0]))
     tasks = jax.tree.map(lambda a: a.reshape(shape + a.shape[1:]), study.batch(ordered).task)
     models = jax.tree.map(lambda a: a[np.array(points)], study.models)
     with jax.enable_x64(env.precision == "float64"):
-        out = _points_rollout(env, policy_apply, trace)(models, tasks, study.params,
-                                                        policy_params, policy_carry)
+        out = _points_play(env, policy_apply, trace)(models, tasks, study.params,
+                                                     policy_params, policy_carry)
     out = jax.tree.map(lambda a: np.asarray(a).reshape((len(ordered),) + a.shape[2:]), out)
     return ordered, out
 
 
 @functools.lru_cache(maxsize=32)
-def _points_rollout(env: LoadSheddingEnv, policy_apply, trace: bool):
-    """jit of `jaxgrid.episode.rollout` vmapped over operating points (models and tasks
+def _points_play(env: LoadSheddingEnv, policy_apply, trace: bool):
+    """jit of `jaxgrid.episode.play_tasks` vmapped over operating points (models and tasks
     batched), one per (env, policy, trace), so repeated calls reuse the compilation."""
 
     def run(models, tasks, params, policy_params, policy_carry):
-        return jax.vmap(lambda grid, task: episode.rollout(
+        return jax.vmap(lambda grid, task: episode.play_tasks(
             env, policy_apply, policy_params, task, params, grid, policy_carry, trace))(
                 models, tasks)
 
@@ -140,20 +140,6 @@ def stratified_sampler(task_set: TaskSet, n_points: int, m: int):
     return sample
 
 
-class MinorVmaps(NamedTuple):
-    """How a grid's rollouts are batched in a PARS iteration (the fields of `ars.pars.Vmaps`):
-    both vmaps keep the batch as every array's last axis (`jaxgrid.batching.vmap_minor`; the
-    perturbed θ stay batch-first), the policy network runs batch-first (`batch_major`)."""
-
-    thetas: Callable = functools.partial(vmap_minor, first=True)
-    tasks: Callable = vmap_minor
-    network: Callable = batch_major
-    lanes: Callable = functools.partial(vmap_minor, first=(True, False, False))
-
-
-GRID_VMAPS = MinorVmaps()
-
-
 def layout(env_config: EnvConfig) -> dict:
     """What a saved policy observes and acts on (checked when it is evaluated); obs_interval
     only where set, so the layouts of policies saved before it existed still match."""
@@ -174,10 +160,12 @@ class GridProblem:
       data: the task set's operating points' models, stacked (n_points, ...).
       obs_size: stacked observation length.  action_size: action buses.
       action_low, action_high: the action range, p.u.
-      sampler: m -> `stratified_sampler`, or None (uniform).  vmaps: `GRID_VMAPS`.
+      sampler: m -> `stratified_sampler`, or None (uniform).
       info: the run information saved with checkpoints and policies (study, points, task
         set, task sampling, layout, history, episode).
     """
+
+    network = staticmethod(batch_major)  # a policy network runs batch-first in the episodes
 
     study: Study
     env: LoadSheddingEnv
@@ -189,8 +177,12 @@ class GridProblem:
     action_low: float
     action_high: float
     sampler: Callable | None
-    vmaps: MinorVmaps
     info: dict
+
+    def evaluator(self, apply, carry, mesh, **batching) -> Callable:
+        """The problem's `evaluate` of a population of `apply` (`jaxgrid.population.evaluator`
+        of `PointEpisode`; batching: task_batch, compact_after, compact_chunks)."""
+        return population.evaluator(self.episode, apply, carry, mesh, **batching)
 
     def save(self, folder: Path) -> None:
         """The resolved study as folder/study.toml (a run folder alone reproduces it)."""
@@ -227,4 +219,4 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
         env.config.history * env.obs_size, len(env.action_slots), float(params.action_low),
         float(params.action_high),
         (functools.partial(stratified_sampler, study.task_set(task_set), study.n_points)
-         if sampling == "stratified" else None), GRID_VMAPS, info)
+         if sampling == "stratified" else None), info)
