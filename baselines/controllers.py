@@ -1,4 +1,4 @@
-"""Every load-shedding controller by its spec, and the saved-policy format they share.
+"""Every load-shedding controller by its spec: one registry, spec prefix -> loader.
 
     none                  never sheds
     uvls                  under-voltage relays (`baselines.uvls`)
@@ -7,105 +7,152 @@
     ppo:PATH              a saved PPO policy (`baselines.ppo`, `experiments.train_ppo`)
     rlgc:FILE             a network the PARS study published (`baselines.rlgc`)
 
-A saved policy is a folder of policy.json and policy.npz: policy.json holds "spec" (what
-rebuilds the network), "kind" (absent for PARS, "ppo" for PPO) and the run's information,
-among it "layout" (`jaxgrid.problem.layout`: the buses it observes and acts on, checked
-against the study it is evaluated on) and "history"; policy.npz holds the arrays. A published
-network states its own layout by bus numbers (`baselines.rlgc_layouts`) and picks its inputs
-from the study's observation. `controller(spec, env)` gives (policy_apply, params, carry)
-for `jaxgrid.episode.play_tasks`; every policy_apply is a controller of its one signature,
-policy_apply(params, obs, carry, inputs) -> (action, carry).
+`load(spec, study)` gives one `Controller`: the loader of the spec's prefix (`LOADERS`) reads
+what a saved policy holds, builds the study's environment once, stacking as many observations
+as the policy was trained with, checks the policy's layout and inputs against it, and binds
+the controller to it. A saved policy (PARS or PPO) is one format: a folder of policy.json and
+policy.npz; policy.json holds "spec" (what rebuilds the network), "kind" (absent for PARS,
+"ppo" for PPO) and the run's information, among it "layout" (`jaxgrid.problem.layout`: the
+buses it observes and acts on) and "history"; policy.npz holds the arrays. A published network
+(the study's own format) states its layout by bus numbers (`baselines.rlgc_layouts`) and picks
+its inputs from the study's observation.
 """
 from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
 
 import jax.numpy as jnp
 
 from jaxgrid.env import LoadSheddingEnv
 from jaxgrid.problem import GridProblem, layout
-from jaxgrid.study import Study
 
 SPECS = "none, uvls, mpc[:OPTIONS], policy:PATH, ppo:PATH or rlgc:FILE"
-SAVED_KINDS = {"policy:": None, "ppo:": "ppo"}  # spec prefix -> the "kind" policy.json holds
+
+
+@dataclasses.dataclass(frozen=True)
+class Controller:
+    """A controller bound to the environment it observes (`load`).
+
+    Attributes:
+      spec: as given, e.g. "policy:runs/x/policy".
+      env: the study's environment, stacking `history` observations.
+      apply: apply(params, obs (history·n_obs,), carry, inputs) -> (action (n_action,),
+        carry), the one signature of `jaxgrid.episode`.
+      params: its parameters.  carry: its state at the start of an episode.
+      layout: the buses a saved policy observes and acts on (`jaxgrid.problem.layout`,
+        checked against env), None for the others.
+      history: the observations it stacks (a saved or published policy's, as trained), None
+        for the others (the study's).
+      info: a saved policy's run information (policy.json), {} for the others.
+    """
+
+    spec: str
+    env: LoadSheddingEnv
+    apply: Callable
+    params: Any
+    carry: Any
+    layout: dict | None = None
+    history: int | None = None
+    info: dict = dataclasses.field(default_factory=dict)
 
 
 def no_control(env: LoadSheddingEnv):
-    """(policy_apply, params, carry) of a controller that never sheds."""
+    """(apply, params, carry) of a controller that never sheds."""
     n = len(env.action_slots)
     return (lambda params, obs, carry, inputs: (jnp.zeros(n), carry)), None, None
 
 
-def saved_policy(control: str):
-    """(Policy, (θ, mean, std), info) of a "policy:PATH" controller, (PolicyInfo, params,
-    info) of a "ppo:PATH" one, (RlgcPolicy, params, {"history"}) of a "rlgc:FILE" one, read
-    once; else None. ValueError if PATH holds no saved policy or one of the other kind."""
-    if control.startswith("rlgc:"):
-        from baselines.rlgc import read_policy
-        policy, params = read_policy(control.removeprefix("rlgc:"))
-        return policy, params, {"history": policy.history}
-    prefix = next((p for p in SAVED_KINDS if control.startswith(p)), None)
-    if prefix is None:
-        return None
+def _none(spec: str, argument: str, study) -> Controller:
+    env = study.env()
+    return Controller(spec, env, *no_control(env))
+
+
+def _uvls(spec: str, argument: str, study) -> Controller:
+    from baselines.uvls import uvls_policy
+
+    env = study.env()
+    return Controller(spec, env, *uvls_policy(env))
+
+
+def _mpc(spec: str, options: str, study) -> Controller:
+    from baselines.mpc import mpc_controller, parse_options
+
+    env = study.env()
+    return Controller(spec, env, *mpc_controller(env, parse_options(options)))
+
+
+def _pars(spec: str, path: str, study) -> Controller:
+    from ars.checkpoint import load_policy
+    from ars.normalizer import initial_carry, normalized_policy
+
+    policy, params, info = load_policy(_saved(spec, path, None))
+    env = _environment(spec, info, study, policy.spec.obs_size)
+    # the network batched as in training (`jaxgrid.problem.GridProblem.network`)
+    return Controller(spec, env, normalized_policy(policy, GridProblem.network), params,
+                      initial_carry(policy), info.get("layout"), env.config.history, info)
+
+
+def _ppo(spec: str, path: str, study) -> Controller:
+    from baselines.ppo import cached_apply, load_policy
+
+    policy, params, info = load_policy(_saved(spec, path, "ppo"))
+    env = _environment(spec, info, study, policy.obs_size)
+    return Controller(spec, env, cached_apply(policy), params, None, info.get("layout"),
+                      env.config.history, info)
+
+
+def _rlgc(spec: str, path: str, study) -> Controller:
+    from baselines.rlgc import read_policy, rlgc_apply
+
+    policy, params = read_policy(path)
+    env = study.env(history=policy.history)
+    return Controller(spec, env, rlgc_apply(policy, env), params,
+                      policy.network.initial_carry(), history=policy.history)
+
+
+# spec prefix -> loader(spec, what follows "prefix:", study) -> Controller; the study needs
+# only `name` and `env(**EnvConfig changes)`
+LOADERS: dict[str, Callable] = {"none": _none, "uvls": _uvls, "mpc": _mpc, "policy": _pars,
+                                "ppo": _ppo, "rlgc": _rlgc}
+SAVED_KINDS = {"policy": None, "ppo": "ppo"}  # prefix -> the "kind" its policy.json holds
+ARGUMENT = {"none": False, "uvls": False, "mpc": None}  # takes none / may take one (else: must)
+
+
+def load(spec: str, study) -> Controller:
+    """The controller `spec` (module docstring) on `study`'s environment; ValueError naming
+    the spec if it is none of `SPECS`, or a saved policy that does not fit the study."""
+    prefix, colon, argument = spec.partition(":")
+    takes = ARGUMENT.get(prefix, True)
+    if prefix not in LOADERS or (takes is False and colon) or (takes is True and not argument):
+        raise ValueError(f"--controller {spec!r}: allowed {SPECS}")
+    return LOADERS[prefix](spec, argument, study)
+
+
+def _saved(spec: str, path: str, kind: str | None) -> str:
+    """`path` if it holds a saved policy of `kind`; ValueError naming the prefix that reads
+    the kind it holds."""
     from ars.checkpoint import read_policy_info
 
-    path = control.removeprefix(prefix)
-    kind = read_policy_info(path).get("kind")
-    if kind != SAVED_KINDS[prefix]:
-        use = next((p for p, k in SAVED_KINDS.items() if k == kind), None)
-        raise ValueError(f"{path}: a {kind or 'PARS'} policy: "
-                         + (f"use {use}PATH" if use else "no controller reads it"))
-    if kind == "ppo":
-        from baselines.ppo import load_policy as load_ppo
-        return load_ppo(path)
-    from ars.checkpoint import load_policy
-    return load_policy(path)
+    held = read_policy_info(path).get("kind")
+    if held != kind:
+        use = next((p for p, k in SAVED_KINDS.items() if k == held), None)
+        raise ValueError(f"{path}: a {held or 'PARS'} policy: "
+                         + (f"use {use}:PATH" if use else "no controller reads it"))
+    return path
 
 
-def check_layout(control: str, info: dict, study: Study, env: LoadSheddingEnv) -> None:
-    """ValueError naming both layouts if a saved policy observes or acts on other buses."""
-    trained = info.get("layout")
-    here = layout(env.config)
+def _environment(spec: str, info: dict, study, obs_size: int) -> LoadSheddingEnv:
+    """The study's environment stacking the saved policy's history (1 if it names none);
+    ValueError naming both layouts if the policy observes or acts on other buses, or the
+    policy's input size if it differs."""
+    env = study.env(history=int(info.get("history", 1)))
+    trained, here = info.get("layout"), layout(env.config)
     if trained is not None and trained != here:
-        raise ValueError(f"{control} (trained on study {info.get('study')!r}) has the layout "
+        raise ValueError(f"{spec} (trained on study {info.get('study')!r}) has the layout "
                          f"{trained}; study {study.name!r} has {here}")
-
-
-def pars_apply(policy):
-    """policy_apply of a PARS `ars.policies.Policy` with its observation normaliser, the
-    network batched as in training (`jaxgrid.problem.GridProblem.network`)."""
-    from ars.normalizer import normalized_policy
-
-    return normalized_policy(policy, GridProblem.network)
-
-
-def controller(spec: str, env: LoadSheddingEnv, saved=None):
-    """(policy_apply, params, carry) of the controller `spec` (module docstring) on `env`;
-    `saved`: a saved policy as `saved_policy` returns it, read from PATH if not given."""
-    if spec == "none":
-        return no_control(env)
-    if spec == "uvls":
-        from baselines.uvls import uvls_policy
-        return uvls_policy(env)
-    if spec == "mpc" or spec.startswith("mpc:"):
-        from baselines.mpc import mpc_controller, parse_options
-        return mpc_controller(env, parse_options(spec.removeprefix("mpc").removeprefix(":")))
-    if spec.startswith("policy:"):
-        from ars.normalizer import initial_carry
-        policy, params, _ = saved or saved_policy(spec)
-        _check_inputs(spec, policy.spec.obs_size, env)
-        return pars_apply(policy), params, initial_carry(policy)
-    if spec.startswith("ppo:"):
-        from baselines.ppo import cached_apply
-        info, params, _ = saved or saved_policy(spec)
-        _check_inputs(spec, info.obs_size, env)
-        return cached_apply(info), params, None
-    if spec.startswith("rlgc:"):
-        from baselines.rlgc import rlgc_apply
-        policy, params, _ = saved or saved_policy(spec)
-        return rlgc_apply(policy, env), params, policy.network.initial_carry()
-    raise ValueError(f"--controller {spec!r}: allowed {SPECS}")
-
-
-def _check_inputs(spec: str, obs_size: int, env: LoadSheddingEnv) -> None:
     if obs_size != env.config.history * env.obs_size:
         raise ValueError(f"{spec}: the policy observes {obs_size} values, this "
                          f"environment gives {env.config.history * env.obs_size}")
+    return env

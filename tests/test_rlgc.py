@@ -25,7 +25,7 @@ import jax
 import numpy as np
 import pytest
 
-from baselines.controllers import controller, saved_policy
+from baselines.controllers import load
 from baselines.rlgc import (LOG_TASKS, RlgcNetwork, networks_of_size, read_policy,
                             rlgc_apply, training_log)
 from baselines.rlgc_layouts import IEEE39, IEEE300
@@ -202,10 +202,12 @@ def test_the_training_log_row_of_the_file_s_iteration():
 
 def test_the_controller_registry_reads_rlgc_files():
     spec = f"rlgc:{V5 / 'policy_plus500.npz'}"
-    policy, params, info = saved_policy(spec)
-    assert info == {"history": 1}
-    apply, _, carry = controller(spec, fake_env(STUDY_39), (policy, params, info))
-    action, carry = apply(params, np.full(11, 0.95, np.float32), carry, None)
+    study = types.SimpleNamespace(name="fake", env=lambda history: fake_env(
+        dataclasses.replace(STUDY_39, history=history)))  # what a loader reads of a study
+    controller = load(spec, study)
+    assert controller.history == 1 and controller.env.config.history == 1
+    action, carry = controller.apply(controller.params, np.full(11, 0.95, np.float32),
+                                     controller.carry, None)
     assert action.shape == (3,) and ((-0.2 <= action) & (action <= 0.0)).all()
     assert carry[0].shape == (32,)
 

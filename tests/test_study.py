@@ -508,14 +508,15 @@ def test_committed_policy_runs_on_the_study_file_at_another_load_level(shared_ca
     policy:results/pnnl39/policy`: the paper's settings (action range, LSTM history 1) at a
     load level; the generalisation set, which indexed the 12 load levels, and the test set
     both run at the one point, and the committed policy's layout is this study's."""
-    from experiments.common.evaluation import controlled_env
+    from baselines.controllers import load
 
     study = read_study(REPO / "studies" / "ieee39_pnnl.toml", raw=[shared_cases / POINTS[1]])
     assert (study.params.action_low, study.history("lstm")) == (-0.2, 1)
     assert len(study.tasks("test")) == 120 and len(study.tasks("generalisation")) == 120
-    env, apply, params, carry = controlled_env(study, f"policy:{REPO / 'results/pnnl39/policy'}")
-    action, _ = apply(params, np.ones(env.config.history * env.obs_size, np.float32), carry,
-                      None)
+    controller = load(f"policy:{REPO / 'results/pnnl39/policy'}", study)
+    env = controller.env
+    action, _ = controller.apply(controller.params, np.ones(env.config.history * env.obs_size,
+                                                            np.float32), controller.carry, None)
     assert env.config.history == 1 and action.shape == (len(env.action_slots),)
     assert np.all((action >= study.params.action_low) & (action <= study.params.action_high))
 

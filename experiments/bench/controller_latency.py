@@ -10,14 +10,15 @@ import time
 import jax
 import jax.numpy as jnp
 
-from ars.normalizer import initial_carry
+from ars.normalizer import initial_carry, normalized_policy
 from ars.policies import Policy, PolicySpec
-from baselines.controllers import pars_apply
+from baselines.controllers import load
 from baselines.mpc import mpc_controller, parse_options
 from baselines.uvls import uvls_policy
 from experiments.common.studyargs import load_study
 from experiments.common.training import paper_preset
 from jaxgrid.episode import ControlInputs
+from jaxgrid.problem import GridProblem
 
 
 def _median_call(fn, args, calls: int) -> float:
@@ -43,17 +44,16 @@ def _controllers(study):
         theta = 0.1 * jax.random.normal(jax.random.PRNGKey(0), (policy.size,))
         params = (theta, jnp.zeros(spec.obs_size), jnp.ones(spec.obs_size))
         label = f"pars_{kind}" + (f"_{'x'.join(map(str, hidden))}" if hidden else "")
-        out.append((label, env, pars_apply(policy), params, initial_carry(policy)))
+        out.append((label, env, normalized_policy(policy, GridProblem.network), params,
+                    initial_carry(policy)))
     return out
 
 
 def _saved_controllers(study, policies: dict):
     """[(label, env, policy_apply, params, carry)] of saved PARS policies {label: folder},
-    each observing as it was trained (`experiments.common.evaluation.controlled_env`)."""
-    from experiments.common.evaluation import controlled_env
-
-    return [(label, *controlled_env(study, f"policy:{folder}"))
-            for label, folder in policies.items()]
+    each observing as it was trained (`baselines.controllers.load`)."""
+    loaded = {label: load(f"policy:{folder}", study) for label, folder in policies.items()}
+    return [(label, c.env, c.apply, c.params, c.carry) for label, c in loaded.items()]
 
 
 def mpc_row(study, options: str, batch: int, calls: int) -> dict:

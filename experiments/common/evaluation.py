@@ -1,8 +1,8 @@
 """A controller evaluated on a study's tasks, as `experiments.evaluate` writes it:
-`controlled_env` (the env a controller observes, a saved policy's layout checked),
 `evaluate` (every task's reward, MW shed and verdict, a published policy's training log
-beside them, figures of the lowest-reward tasks) and `default_out` (where a result goes
-without --out). The reproduction harness and the latency benchmark use them too.
+beside them, figures of the lowest-reward tasks; the controller from
+`baselines.controllers.load`) and `default_out` (where a result goes without --out). The
+reproduction harness uses them too.
 """
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.controllers import check_layout, controller, saved_policy
+from baselines.controllers import load
 from baselines.rlgc import training_log
 from jaxgrid.recovery import envelope
 from jaxgrid.problem import play_specs
@@ -29,23 +29,12 @@ def task_specs(study: Study, tasks: str):
     return fault_set(read_task_config(tasks), study.buses).specs(study.n_points)
 
 
-def controlled_env(study: Study, control: str):
-    """(env, policy_apply, params, carry) of controller `control` on the study: the env
-    stacks as many observations as a saved policy was trained with, whose layout is
-    checked."""
-    saved = saved_policy(control)
-    history = int(saved[2].get("history", 1)) if saved else None  # as the policy was trained
-    env = study.env(**({"history": history} if history else {}))
-    if saved:
-        check_layout(control, saved[2], study, env)
-    return (env, *controller(control, env, saved))
-
-
 def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
              plot_count: int = 3) -> dict:
     """The results dict of the module docstring (and figures in plot_dir). `tasks`: a task
     set name, a PNNL task JSON, or a list of TaskSpec."""
-    env, apply, policy_params, carry = controlled_env(study, control)
+    controller = load(control, study)
+    env = controller.env
     log = training_log(control.removeprefix("rlgc:")) if control.startswith("rlgc:") else None
     for k, point in enumerate(study.points):
         unchecked = env.unchecked_buses(study.params, study.point(k))
@@ -53,8 +42,8 @@ def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
             print(f"{study.name} {point.label}: observed buses {list(unchecked)} sit below the "
                   "recovery level before any fault; the recovery check leaves them out")
     chosen = tasks if isinstance(tasks, list) else task_specs(study, tasks)
-    specs, out = play_specs(study, env, apply, policy_params, chosen, carry,
-                               trace=plot_dir is not None)
+    specs, out = play_specs(study, env, controller.apply, controller.params, chosen,
+                            controller.carry, trace=plot_dir is not None)
     rows = [{"fault_bus": s.fault_bus, "fault_duration": s.fault_duration,
              "fault_start": s.fault_start, "operating_point": study.points[s.operating_point]
              .label, "point": s.operating_point, "reward": float(out["reward"][k]),

@@ -305,7 +305,7 @@ class Runs:
         """One episode of `control` on a fault at `fault_bus` lasting `duration` s at the first
         operating point, cached: t (s), vm (steps, observed buses) p.u., shed_mw cumulative,
         reward, recovered, observed (bus numbers)."""
-        from experiments.common.evaluation import controlled_env
+        from baselines.controllers import load
         from jaxgrid.tasks import TaskSpec
 
         path = self.folder("trace", {**self._controller_inputs(control), "bus": fault_bus,
@@ -313,9 +313,11 @@ class Runs:
         path = path / "trace.json"
         if path.is_file():
             return json.loads(path.read_text())
-        env, apply, params, carry = controlled_env(self.study, self._spec(control))
+        controller = load(self._spec(control), self.study)
+        env = controller.env
         task = TaskSpec(fault_bus, duration, self.study.task_set("test").fault_starts[0])
-        _, out = play_specs(self.study, env, apply, params, [task], carry, trace=True)
+        _, out = play_specs(self.study, env, controller.apply, controller.params, [task],
+                            controller.carry, trace=True)
         steps = out["vm"].shape[1]
         result = {"t": ((np.arange(steps) + 1) * env.config.agent_dt).tolist(),
                   "vm": out["vm"][0].tolist(),
