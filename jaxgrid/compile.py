@@ -67,6 +67,7 @@ _KINDS = {
 MACHINE_BASE_RULES = ("gridpack", "raw")  # CompileOptions.machine_base
 GRIDPACK_RESIZED = ("GENSAL", "GENROU")  # the machine models GridPACK re-bases when overloaded
 MBASE_MARGIN = 1.2  # GridPACK's new MBASE over the machine's loading
+INIT_SWEEPS = 2  # network sweeps of the check that every device starts at rest (Solver's default)
 
 
 class ModelWarning(UserWarning):
@@ -92,7 +93,6 @@ class CompileOptions:
       motors: readings of motor-load data where reference simulators disagree.
       composite: readings of the WECC composite load (CMLDBLU1/2) data.
       precision: "float32" (default time loop) or "float64".
-      sweeps: fixed-point sweeps per network solution (>= 1).
       machine_base: "gridpack" (default) or "raw", where the power flow loads a GENSAL or
         GENROU beyond its MBASE ([choice], `machine_bases`).
       init_tolerance: largest |derivative| at t = 0 accepted without an InitWarning.
@@ -104,7 +104,6 @@ class CompileOptions:
     motors: MotorOptions = MotorOptions()
     composite: CompositeOptions = CompositeOptions()
     precision: str = "float32"
-    sweeps: int = 2
     init_tolerance: float = 1e-5
     machine_base: str = "gridpack"
 
@@ -114,8 +113,6 @@ class CompileOptions:
                              f"{', '.join(MACHINE_BASE_RULES)}")
         if self.precision not in ("float32", "float64"):
             raise ValueError(f"precision = {self.precision!r}: allowed 'float32' or 'float64'")
-        if not isinstance(self.sweeps, int) or self.sweeps < 1:
-            raise ValueError(f"sweeps = {self.sweeps!r}: must be an int >= 1")
 
 
 def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOptions(),
@@ -199,7 +196,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
         gen_id=tuple(gen.gen_id[g].strip() for g in order),
         slot_bus=tuple(int(b) for b in slot_bus), load_bus=tuple(int(b) for b in load_bus),
         omega_b=float(2 * np.pi * case.frequency_hz), pq_break=options.loads.pq_break,
-        sweeps=options.sweeps if len(load_bus) else 1, precision="float64", notes=())
+        precision="float64", notes=())
     _check_initial_state(model, options.init_tolerance, notes)
     _check_values(model, options.precision)
     return with_precision(dataclasses.replace(model, notes=tuple(notes)), options.precision)
@@ -624,7 +621,7 @@ def _check_initial_state(model: GridModel, tolerance: float, notes: list[str]) -
     with jax.enable_x64(True):
         x0 = model.initial
         fault = network.fault_view(model.network, 0, 1.0)
-        rates, v, _ = derivatives(model, x0, fault, 0.0)
+        rates, v, _ = derivatives(model, x0, fault, 0.0, INIT_SWEEPS)
         problems = []
         for family, drift, states in zip(FAMILIES, rates, x0.integrated()):
             for g, dx, x in zip(getattr(model, family), drift, states):

@@ -4,24 +4,20 @@ Order of one evaluation (spec §0 initialisation order, run forwards):
 machine EMFs -> Norton sources -> network (with fault, static loads and load models, all
 scaled by the connected fraction) -> machine currents (`Signals`) -> one loop over the
 device families: exciters (EFD) -> governors (Pm) -> machine and load-model derivatives.
-Once per accepted step `update_loads` advances the load models' discrete logic.
+Once per accepted step `update_loads` advances the load models' discrete logic. How a step
+is taken from these rates is `jaxgrid.steppers`'.
 """
 from __future__ import annotations
 
-import math
 from functools import partial
 
-import jax
 import jax.numpy as jnp
 
 from jaxgrid import network
-from jaxgrid.grid import GridModel, GridState
+from jaxgrid.grid import GridModel, GridState, Integrated
 from jaxgrid.models import loads
-from jaxgrid.models.base import LoadPorts, Signals
-from jaxgrid.vecmath import sincos
+from jaxgrid.models.base import Signals
 
-ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)  # ROS2's γ: L-stable, second order for any J
-PHI_SERIES_BELOW = 0.5  # |λ·dt| below which φ1, φ2 come from their Taylor series
 FAMILIES = ("machines", "exciters", "governors", "loads")  # GridModel/GridState fields
 # Evaluation order: each family reads what the earlier ones wrote (exciters EFD, governors
 # Pm, both read by the machines)
@@ -63,14 +59,12 @@ def load_injection(model: GridModel, x: GridState, v_load):
     return total
 
 
-def solve_network(model: GridModel, x: GridState, fault: network.Fault, active,
-                  sweeps: int | None = None):
+def solve_network(model: GridModel, x: GridState, fault: network.Fault, active, sweeps: int):
     """Slot voltages (n_slot,), slot injections (n_slot,), residual, and EMFs (n_gen,), by
-    `sweeps` fixed-point sweeps (static; default the model's) from x.v."""
+    `sweeps` fixed-point sweeps (static) from x.v."""
     emf = machine_emf(model, x)
     v, current, residual = network.solve(model.network, fault, active, emf * model.y_norton,
-                                         partial(load_injection, model, x), x.v,
-                                         sweeps or model.sweeps)
+                                         partial(load_injection, model, x), x.v, sweeps)
     return v, current, residual, emf
 
 
@@ -93,8 +87,8 @@ def machine_signals(model: GridModel, x: GridState, v, emf) -> Signals:
                    v_load=v[model.n_gen:], omega_b=model.omega_b)
 
 
-def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
-    """Time derivatives of every integrated state.
+def derivatives(model: GridModel, x: GridState, fault: network.Fault, active, sweeps: int):
+    """Time derivatives of every integrated state, the network solved by `sweeps` sweeps.
 
     One loop over the families in `CAUSAL_ORDER`: each group reads its ports from the
     signals (`DeviceModel.ports`), and its output (EFD, Pm) is written back before the
@@ -103,11 +97,10 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
     Args:
       x: current state; fault/active: the task's fault and whether it is on (0/1).
     Returns:
-      (dx, v, residual): dx a tuple (machines, exciters, governors, loads) of {state: rate}
-      dicts mirroring x.integrated(); v (n_slot,) the slot voltages; residual the network
-      fixed-point residual.
+      (dx, v, residual): dx the `Integrated` {state: rate} dicts mirroring x.integrated();
+      v (n_slot,) the slot voltages; residual the network fixed-point residual.
     """
-    v, _, residual, emf = solve_network(model, x, fault, active)
+    v, _, residual, emf = solve_network(model, x, fault, active, sweeps)
     signals = machine_signals(model, x, v, emf)
     rates = {}
     for family in CAUSAL_ORDER:
@@ -121,7 +114,7 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
                 driven = getattr(signals, g.model.output).at[k].set(out)
                 signals = signals._replace(**{g.model.output: driven})
             rates[family].append(dx)
-    return tuple(tuple(rates[family]) for family in FAMILIES), v, residual
+    return Integrated(*(tuple(rates[family]) for family in FAMILIES)), v, residual
 
 
 def update_loads(model: GridModel, x: GridState, v_old, dt: float) -> GridState:
@@ -138,7 +131,7 @@ def update_loads(model: GridModel, x: GridState, v_old, dt: float) -> GridState:
 
 def clip_to_limits(model: GridModel, states):
     """Clip non-windup states to their limits after an update (cannot overshoot by a step);
-    states mirrors x.integrated()."""
+    states (`Integrated`) mirrors x.integrated()."""
 
     def clip(groups, values):
         out = []
@@ -149,226 +142,5 @@ def clip_to_limits(model: GridModel, states):
             out.append(xs)
         return tuple(out)
 
-    return tuple(clip(getattr(model, family), values)
-                 for family, values in zip(FAMILIES, states))
-
-
-def axpy(a, dx, x):
-    """x + a·dx over matching state trees."""
-    return jax.tree.map(lambda d, s: s + a * d, dx, x)
-
-
-def stiff_rates(model: GridModel, x: GridState) -> tuple:
-    """Per load group, {(real state, imaginary state): λ (n,) complex, 1/s} of its stiff
-    complex states (`LoadModel.stiff_rates`), at the state x."""
-    return tuple(g.model.stiff_rates(g.params, xs, zs)
-                 for g, xs, zs in zip(model.loads, x.loads, x.load_flags))
-
-
-def phi_functions(z):
-    """(φ1, φ2) = ((e^z − 1)/z, (e^z − 1 − z)/z²) of complex z, elementwise; Taylor series
-    (through z⁶) below |z| = PHI_SERIES_BELOW, where the quotients lose digits."""
-    small = jnp.abs(z) < PHI_SERIES_BELOW
-    zs = jnp.where(small, 1.0, z)
-    sin, cos = sincos(jnp.imag(zs))
-    exp = jnp.exp(jnp.real(zs)) * jax.lax.complex(cos, sin)
-    # φ_k(z) = Σ_n z^n / (n + k)!, in Horner form
-    series1, series2 = 1 / math.factorial(7), 1 / math.factorial(8)
-    for n in range(6, -1, -1):
-        series1 = 1 / math.factorial(n + 1) + z * series1
-        series2 = 1 / math.factorial(n + 2) + z * series2
-    return (jnp.where(small, series1, (exp - 1) / zs),
-            jnp.where(small, series2, (exp - 1 - zs) / (zs * zs)))
-
-
-def _stiff_pairs(rates) -> list[tuple[int, tuple[str, str]]]:
-    """(load group, (real state, imaginary state)) of every stiff pair, in `rates` order."""
-    return [(g, names) for g, lams in enumerate(rates) for names in lams]
-
-
-def _gather(states, pairs):
-    """(n_stiff,) complex: every stiff pair's value, concatenated in `pairs` order."""
-    return jnp.concatenate([states[3][g][re] + 1j * states[3][g][im] for g, (re, im) in pairs])
-
-
-def _scatter(states, pairs, values):
-    """`states` with the stiff pairs set to the parts of `values` (n_stiff,) complex."""
-    machines, exciters, governors, loads = states
-    loads = [dict(xs) for xs in loads]
-    offset = 0
-    for g, (re, im) in pairs:
-        n = loads[g][re].shape[0]
-        part = values[offset:offset + n]
-        loads[g][re], loads[g][im] = jnp.real(part), jnp.imag(part)
-        offset += n
-    return machines, exciters, governors, tuple(loads)
-
-
-def exponential_heun(model: GridModel, x: GridState, dt: float, implicit=frozenset()):
-    """(predict, correct) of one step from x: Heun's Euler predictor and trapezoidal
-    corrector, with every stiff pair (`stiff_rates`, λ frozen at x) advanced by the
-    exponential Runge-Kutta pair of the same order (ETD2RK, Cox & Matthews 2002):
-
-        predicted = s0 + dt·φ1(λdt)·k1
-        new       = predicted + dt·φ2(λdt)·(k2 − k1 − λ·(predicted − s0)),
-
-    which integrates the part λ·s exactly and is Heun's method where λ = 0. Every pair of
-    every group is handled as one concatenated array (one set of kernels, not one per pair).
-    predict(s0, k1) -> predicted; correct(s0, predicted, k1, k2) -> new (state trees).
-    The load groups in `implicit` (indices) are left to Heun (`rosenbrock_heun` takes them).
-    """
-    rates = stiff_rates(model, x)
-    pairs = [(g, names) for g, names in _stiff_pairs(rates) if g not in implicit]
-
-    def euler(s0, k1):
-        return axpy(dt, k1, s0)
-
-    def heun(s0, predicted, k1, k2):
-        return axpy(0.5 * dt, k2, axpy(0.5 * dt, k1, s0))
-
-    if not pairs:
-        return euler, heun
-    lam = jnp.concatenate([rates[g][names] for g, names in pairs])
-    phi1, phi2 = phi_functions(lam * dt)
-
-    def predict(s0, k1):
-        return _scatter(euler(s0, k1), pairs,
-                        _gather(s0, pairs) + dt * phi1 * _gather(k1, pairs))
-
-    def correct(s0, predicted, k1, k2):
-        p0 = _gather(predicted, pairs)
-        step = _gather(k2, pairs) - _gather(k1, pairs) - lam * (p0 - _gather(s0, pairs))
-        return _scatter(heun(s0, predicted, k1, k2), pairs, p0 + dt * phi2 * step)
-
-    return predict, correct
-
-
-def _implicit_blocks(model: GridModel) -> list[tuple[int, tuple[str, ...]]]:
-    """(load group, state names) of every implicit block (`LoadModel.implicit_blocks`)."""
-    return [(g, names) for g, group in enumerate(model.loads)
-            for names in group.model.implicit_blocks()]
-
-
-def _gather_blocks(loads, blocks) -> list:
-    """[(n_blocked,) per block position]: the blocks' states, concatenated in `blocks` order."""
-    return [jnp.concatenate([loads[g][names[i]] for g, names in blocks])
-            for i in range(len(blocks[0][1]))]
-
-
-def _scatter_blocks(loads, blocks, columns) -> tuple:
-    """`loads` (x.loads' structure) with the blocks' states set from `columns`."""
-    loads = [dict(xs) for xs in loads]
-    offset = 0
-    for g, names in blocks:
-        n = loads[g][names[0]].shape[0]
-        for name, column in zip(names, columns):
-            loads[g][name] = column[offset:offset + n]
-        offset += n
-    return tuple(loads)
-
-
-def block_jacobian(model: GridModel, x: GridState, blocks) -> list[list]:
-    """J[i][j] (n_blocked,): ∂(rate of a block's state i)/∂(its state j) at x and the fixed
-    slot voltages x.v, every block of `blocks` concatenated. One forward-mode pass per block
-    position: its tangent seeds position j of every block of a group at once, which the
-    blocks' independence (`LoadModel.implicit_blocks`) allows."""
-    v_load = x.v[model.n_gen:]
-    size = len(blocks[0][1])
-    columns = {}
-    for g in sorted({g for g, _ in blocks}):
-        group, xs = model.loads[g], x.loads[g]
-        ports = LoadPorts(v=v_load[_index(group)], flags=x.load_flags[g])
-        seeds = {name: jnp.zeros((size,) + a.shape, a.dtype) for name, a in xs.items()}
-        for names in group.model.implicit_blocks():
-            for j, name in enumerate(names):
-                seeds[name] = seeds[name].at[j].set(1.0)
-
-        def column(seed, group=group, xs=xs, ports=ports):
-            return jax.jvp(lambda s: group.model.rates(group.params, s, ports)[1], (xs,),
-                           (seed,))[1]
-
-        columns[g] = jax.vmap(column)(seeds)
-    return [[jnp.concatenate([columns[g][names[i]][j] for g, names in blocks])
-             for j in range(size)] for i in range(size)]
-
-
-def lu_solver(a: list[list]):
-    """solve(b) -> y with a·y = b, for a batch of small dense systems: a[i][j] and b[i] are
-    (n,) arrays (one system per element), eliminated in place without pivoting, which
-    the linearly implicit step's matrices I − γ·dt·J allow (their E' blocks are scaled
-    rotations with a diagonal above 1)."""
-    size = len(a)
-    a = [list(row) for row in a]
-    for p in range(size):
-        for i in range(p + 1, size):
-            a[i][p] = a[i][p] / a[p][p]
-            for j in range(p + 1, size):
-                a[i][j] = a[i][j] - a[i][p] * a[p][j]
-
-    def solve(b):
-        y = list(b)
-        for i in range(size):
-            for j in range(i):
-                y[i] = y[i] - a[i][j] * y[j]
-        for i in reversed(range(size)):
-            for j in range(i + 1, size):
-                y[i] = y[i] - a[i][j] * y[j]
-            y[i] = y[i] / a[i][i]
-        return y
-
-    return solve
-
-
-def motor_jacobian(model: GridModel, x: GridState):
-    """`block_jacobian` of every implicit block of the model at x, None when it has none:
-    what `rosenbrock_heun` takes as its `jacobian`."""
-    blocks = _implicit_blocks(model)
-    return block_jacobian(model, x, blocks) if blocks else None
-
-
-def rosenbrock_heun(model: GridModel, x: GridState, dt: float, jacobian=None):
-    """(predict, correct) of one step from x, as `exponential_heun`, with every implicit
-    block (`LoadModel.implicit_blocks`: a motor's E', ψk and speed) advanced by the
-    two-stage linearly implicit Rosenbrock method ROS2 (Verwer, Spee, Blom & Hundsdorfer
-    1999), with W = I − γ·dt·J and J the block's Jacobian (`block_jacobian`, at x by default):
-
-        W·K1 = dt·k1,   predicted = s0 + K1,
-        W·K2 = dt·k2 − 2·K1,   new = s0 + 1.5·K1 + 0.5·K2.
-
-    k1 and k2 are the step's two rate evaluations (at s0 and at the predictor, each with
-    its own network solution), so the step costs what Heun's does plus two block solves and
-    the Jacobian (5 forward-mode passes of the load models' rates, held: below). ROS2 is second
-    order for any J (a W-method) and L-stable with the exact one; with J = 0 it is Heun.
-    It stays stable for the motors' electromechanical mode (E' against ω, about
-    −27 ± 85j 1/s at the PNNL 300-bus operating point, faster at high voltage), which the
-    exponential step leaves to Heun. Every other state takes `exponential_heun`'s step.
-
-    `jacobian` (`motor_jacobian`) may come from an earlier state: a W-method stays second
-    order with any J, so `jaxgrid.simulate.integrate` evaluates it once per call (the
-    environment once per agent step) and holds it for that call's steps. None: J at x.
-    """
-    blocks = _implicit_blocks(model)
-    predict_rest, correct_rest = exponential_heun(model, x, dt, {g for g, _ in blocks})
-    if not blocks:
-        return predict_rest, correct_rest
-    jacobian = block_jacobian(model, x, blocks) if jacobian is None else jacobian
-    solve = lu_solver([[float(i == j) - ROS2_GAMMA * dt * jij for j, jij in enumerate(row)]
-                       for i, row in enumerate(jacobian)])
-
-    def first_stage(k1):
-        return solve([dt * r for r in _gather_blocks(k1[3], blocks)])
-
-    def predict(s0, k1):
-        out = predict_rest(s0, k1)
-        start, k_1 = _gather_blocks(s0[3], blocks), first_stage(k1)
-        return (*out[:3], _scatter_blocks(out[3], blocks,
-                                          [s + a for s, a in zip(start, k_1)]))
-
-    def correct(s0, predicted, k1, k2):
-        out = correct_rest(s0, predicted, k1, k2)
-        start, k_1 = _gather_blocks(s0[3], blocks), first_stage(k1)
-        k_2 = solve([dt * r - 2.0 * a for r, a in zip(_gather_blocks(k2[3], blocks), k_1)])
-        return (*out[:3], _scatter_blocks(out[3], blocks, [s + 1.5 * a + 0.5 * b
-                                                           for s, a, b in zip(start, k_1, k_2)]))
-
-    return predict, correct
+    return Integrated(*(clip(getattr(model, family), values)
+                        for family, values in zip(FAMILIES, states)))

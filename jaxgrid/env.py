@@ -42,11 +42,10 @@ from flax import struct
 from jaxgrid import network
 from jaxgrid.case import VOLTAGE
 from jaxgrid.checks import InputError, Range, check_int, check_listed
-from jaxgrid.dynamics import motor_jacobian
 from jaxgrid.grid import GridModel, GridState
 from jaxgrid.recovery import envelope, mask_allows, normal_operation
-from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, checked, clip_closed,
-                              bus_voltage_sets, initial_health, integrate, shed)
+from jaxgrid.simulate import Bounds, Health, Task, advance, bus_voltage_sets, initial_health
+from jaxgrid.steppers import Solver, clip_closed, shed
 
 
 @struct.dataclass
@@ -106,14 +105,12 @@ def check_params(values: dict, key=lambda field: field) -> None:
         raise InputError(key("action_low"), low, f"must be <= action_high = {high}")
 
 
+SOLVER_FIELDS = tuple(f.name for f in dataclasses.fields(Solver))  # EnvConfig.of, replace
 AGENT_DT = Range(0.0, 60.0, "s", lo_open=True)
 EPISODE = Range(0.0, 3600.0, "s", lo_open=True)
 HISTORY = Range(1, 1000, "observations")
 OBS_INTERVAL = Range(0.0, 60.0, "s", lo_open=True)
 ACTION_DEADBAND = Range(0.0, 1.0, "of the initial load per step")
-FINE_WINDOW = Range(0.0, 3600.0, "s after clearing")
-SWEEPS = Range(1, 100, "network sweeps")
-MOTOR_STEPS = ("exponential", "rosenbrock")  # EnvConfig.motor_step
 ACTION_MASKS = ("none", "hadrec")  # EnvConfig.action_mask
 
 
@@ -123,23 +120,15 @@ class EnvConfig:
 
     Attributes:
       observed_buses, action_buses: RAW bus numbers.
-      dt: simulation step, s (inside the fault window when coarse_dt is set).
-      coarse_dt: simulation step outside the fault window, s; None: dt throughout. An agent
-        step that overlaps [fault start, clearing + fine_window) runs at dt, every other
-        one at coarse_dt (the steady state before the fault and the slow recovery after
-        it). Its accuracy is measured like dt's (`experiments.diagnostics.step_accuracy`).
-      fine_window: s after clearing that the step stays dt (used with coarse_dt).
-      coarse_sweeps: network sweeps per solution at coarse_dt (None: the model's).
-      motor_step: how the load models' motors are integrated (`MOTOR_STEPS`; None: the
-        model's, "exponential" unless set): "exponential" (`jaxgrid.dynamics.
-        exponential_heun`: E' and ψk exactly, the speed by Heun) or "rosenbrock"
-        (`jaxgrid.dynamics.rosenbrock_heun`: each motor's E', ψk and speed together,
-        linearly implicit, stable for their electromechanical mode). None is left out of a
-        written study, so run folders named by earlier studies keep their names.
-      agent_dt: control step, s.  episode: length, s.
+      solver: how the grid is integrated (`jaxgrid.steppers.Solver`: step, sweeps, motor
+        step, coarse step outside the fault window); the simulator's, held here so that the
+        environment's agent steps are whole numbers of its steps. A study file writes its
+        fields in [env] (sweeps in [compile]); `replace` takes them as EnvConfig's.
+      agent_dt: control step, s (a whole number of solver.dt and of solver.coarse_dt).
+      episode: length, s.
       history: number of last observations stacked (1: just the current one).
       obs_interval: s between the stacked observations, a whole fraction of agent_dt and a
-        whole number of simulation steps; each agent step then appends agent_dt/obs_interval
+        whole number of the solver's steps; each agent step then appends agent_dt/obs_interval
         observations, the last at its end (HADREC's GridPACK environment samples every
         0.02 s). None: one per agent step, at its end.
       include_action_status: the observation ends with the connected load fraction at the
@@ -158,11 +147,7 @@ class EnvConfig:
 
     observed_buses: tuple[int, ...]
     action_buses: tuple[int, ...]
-    dt: float = 0.002
-    coarse_dt: float | None = None
-    fine_window: float = 1.0
-    coarse_sweeps: int | None = None
-    motor_step: str | None = None
+    solver: Solver = Solver(dt=0.002)
     agent_dt: float = 0.1
     episode: float = 10.0
     history: int = 1
@@ -175,20 +160,10 @@ class EnvConfig:
 
     def __post_init__(self):
         """InputError naming the field (as `key`) of a value outside its range."""
-        DT.check("dt", self.dt)
-        if self.motor_step is not None and self.motor_step not in MOTOR_STEPS:
-            raise InputError("motor_step", self.motor_step, f"must be one of {MOTOR_STEPS}")
         AGENT_DT.check("agent_dt", self.agent_dt)
-        FINE_WINDOW.check("fine_window", self.fine_window)  # unused values checked too
-        if self.coarse_sweeps is not None:
-            check_int("coarse_sweeps", self.coarse_sweeps, SWEEPS)
-        steps = {"dt": self.dt}
-        if self.coarse_dt is not None:
-            coarse = Range(self.dt, DT.hi, "s (dt up to the largest step)")
-            reason = coarse.problem(self.coarse_dt)
-            if reason:
-                raise InputError("coarse_dt", self.coarse_dt, reason, related=("dt",))
-            steps["coarse_dt"] = self.coarse_dt
+        steps = {"dt": self.solver.dt}
+        if self.solver.coarse_dt is not None:
+            steps["coarse_dt"] = self.solver.coarse_dt
         spans = {"agent_dt": self.agent_dt}
         if self.obs_interval is not None:
             OBS_INTERVAL.check("obs_interval", self.obs_interval)
@@ -215,25 +190,32 @@ class EnvConfig:
                 raise InputError("recovery_buses", list(self.recovery_buses), f"buses {outside} "
                                  "are not observed buses", related=("observed_buses",))
 
-    def steps_per_agent_step(self, dt: float) -> int:
-        """Simulation steps of dt seconds in one agent step."""
-        return int(round(self.agent_dt / dt))
+    @classmethod
+    def of(cls, values: dict) -> EnvConfig:
+        """The config of {field: value} naming EnvConfig's fields and the solver's
+        (`SOLVER_FIELDS`, as a study file's [env] table and its [compile] sweeps), the
+        solver's others EnvConfig's default solver's; checked."""
+        solver = {k: values[k] for k in SOLVER_FIELDS if k in values}
+        return cls(solver=dataclasses.replace(cls.solver, **solver),
+                   **{k: v for k, v in values.items() if k not in solver})
+
+    def values(self) -> dict:
+        """{field: value} of EnvConfig's fields and the solver's (what `of` takes)."""
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        solver = fields.pop("solver")
+        return {**fields, **{k: getattr(solver, k) for k in SOLVER_FIELDS}}
+
+    def replace(self, **changes) -> EnvConfig:
+        """This config with fields of EnvConfig or of its solver changed, checked."""
+        solver = {k: changes.pop(k) for k in SOLVER_FIELDS if k in changes}
+        if solver:
+            changes["solver"] = dataclasses.replace(self.solver, **solver)
+        return dataclasses.replace(self, **changes)
 
     @property
-    def sim_steps(self) -> int:
-        """Simulation steps per agent step."""
-        return self.steps_per_agent_step(self.dt)
-
-    def in_fault_window(self, t, task: Task):
-        """() bool: the agent step that starts at t (s) overlaps [fault start, clearing +
-        fine_window), so it runs at dt rather than coarse_dt."""
-        return ((t + self.agent_dt - 0.5 * self.dt > task.fault_start)
-                & (t < task.fault_end + self.fine_window))
-
-    @property
-    def coarse_steps(self) -> int:
-        """Simulation steps per agent step at coarse_dt."""
-        return self.steps_per_agent_step(self.coarse_dt)
+    def dt(self) -> float:
+        """The simulation step, s (solver.dt: the fault window's, with a coarse step)."""
+        return self.solver.dt
 
     @property
     def n_steps(self) -> int:
@@ -351,9 +333,10 @@ class LoadSheddingEnv:
         return tuple(int(b) for b, is_low in zip(self.config.observed_buses, low) if is_low)
 
     def with_config(self, **changes) -> LoadSheddingEnv:
-        """The same environment with `EnvConfig` fields changed (e.g. dt, episode), checked."""
+        """The same environment with `EnvConfig` or solver fields changed (e.g. dt, episode),
+        checked (`EnvConfig.replace`)."""
         env = copy.copy(self)
-        env.config = dataclasses.replace(self.config, **changes)
+        env.config = self.config.replace(**changes)
         return env
 
     @property
@@ -364,7 +347,7 @@ class LoadSheddingEnv:
     def _observe(self, grid: GridModel, x: GridState, t, task: Task, fault):
         """(vm (n_observed,), observation (n_obs,), action_vm (n_action,)) at t (s), p.u."""
         vm, action_vm = (jnp.abs(v) for v in bus_voltage_sets(
-            grid, x, t, self.config.dt, task, fault, self.observed, self.action_buses))
+            grid, x, t, self.config.solver, task, fault, self.observed, self.action_buses))
         if not self.config.include_action_status:
             return vm, vm, action_vm
         return vm, jnp.concatenate([vm, x.load_left[self.action_slots]]), action_vm
@@ -389,29 +372,12 @@ class LoadSheddingEnv:
 
     def _advance(self, grid: GridModel, x: GridState, health: Health, t, task: Task, fault,
                  done):
-        """(grid state, health) one agent step after x at t (s): sim_steps steps of dt, or,
-        with coarse_dt, those inside the fault window and coarse_steps steps of coarse_dt
-        (with coarse_sweeps network sweeps) outside it; the motors step by motor_step.
-
-        With coarse_dt, a finished episode (`done`, () bool) takes no steps: vmapped, the two
-        step loops run as long as their longest member, and an episode frozen inside the fault
-        window would otherwise keep the fine loop running for the whole batch."""
+        """(grid state, health) one agent step after x at t (s), by the config's solver
+        (`jaxgrid.simulate.advance`: with a coarse step, a finished episode (`done`, () bool)
+        takes no steps)."""
         cfg = self.config
-        grid = grid.replace(motor_step=cfg.motor_step or grid.motor_step)
-        if cfg.coarse_dt is None:
-            return advance(grid, x, health, t, cfg.sim_steps, cfg.dt, task, fault, cfg.bounds)
-        window = cfg.in_fault_window(t, task)
-        fine, coarse = window & ~done, ~window & ~done
-        coarse_grid = grid.replace(sweeps=cfg.coarse_sweeps or grid.sweeps)
-        # one of the two loops runs: both hold the motors' Jacobian at x, evaluated once
-        jacobian = motor_jacobian(grid, x) if grid.motor_step == "rosenbrock" else None
-        new, residual = integrate(grid, x, health.residual, t,
-                                  jnp.where(fine, cfg.sim_steps, 0), cfg.dt, task, fault,
-                                  jacobian)
-        new, residual = integrate(coarse_grid, new, residual, t,
-                                  jnp.where(coarse, cfg.coarse_steps, 0), cfg.coarse_dt, task,
-                                  fault, jacobian)
-        return checked(x, new, health, residual, t + cfg.agent_dt, cfg.bounds)
+        return advance(grid, x, health, t, cfg.agent_dt, cfg.solver, task, fault, cfg.bounds,
+                       done)
 
     def _advance_observed(self, grid: GridModel, x: GridState, health: Health, t, task: Task,
                           fault, done):

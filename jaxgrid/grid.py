@@ -1,10 +1,13 @@
 """The compiled grid: static structure (Python ints and tuples) plus parameter and state arrays.
 
-Built by `jaxgrid.compile.compile_model`; read by `jaxgrid.dynamics` and `jaxgrid.simulate`.
+Built by `jaxgrid.compile.compile_model`; read by `jaxgrid.dynamics` and `jaxgrid.simulate`
+(how it is integrated is not the model's: `jaxgrid.steppers.Solver`).
 Array leaves are NumPy arrays already in the model's precision (float32/complex64 by
 default, float64/complex128 with `precision="float64"`), so `jit` takes them as they are.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from flax import struct
@@ -31,6 +34,20 @@ class DeviceGroup:
     labels: tuple[str, ...] = struct.field(pytree_node=False)
 
 
+class Integrated(NamedTuple):
+    """The states Heun integrates, per family a tuple over its device groups of {state name:
+    (n_unit,)} (p.u., rad); also their rates (`jaxgrid.dynamics.derivatives`).
+
+    Attributes:
+      machines, exciters, governors, loads: as `GridState`'s fields of those names.
+    """
+
+    machines: tuple
+    exciters: tuple
+    governors: tuple
+    loads: tuple
+
+
 @struct.dataclass
 class GridState:
     """The dynamic state of one rollout.
@@ -53,15 +70,13 @@ class GridState:
     load_left: np.ndarray
     v: np.ndarray
 
-    def integrated(self) -> tuple:
-        """The Heun-integrated part: (machines, exciters, governors, loads)."""
-        return (self.machines, self.exciters, self.governors, self.loads)
+    def integrated(self) -> Integrated:
+        """The Heun-integrated part."""
+        return Integrated(self.machines, self.exciters, self.governors, self.loads)
 
-    def with_integrated(self, states: tuple, v) -> GridState:
+    def with_integrated(self, states: Integrated, v) -> GridState:
         """This state with new integrated parts `states` and slot voltages v."""
-        machines, exciters, governors, loads = states
-        return self.replace(machines=machines, exciters=exciters, governors=governors,
-                            loads=loads, v=v)
+        return self.replace(**states._asdict(), v=v)
 
 
 @struct.dataclass
@@ -90,10 +105,6 @@ class GridModel:
       slot_bus: static bus index per slot; load_bus: static bus index per load slot.
       omega_b: base angular frequency 2π·f, rad/s (static).
       pq_break: p.u. voltage where constant power turns into constant admittance (static).
-      sweeps: fixed-point sweeps per network solution (static).
-      motor_step: how the load models' motors are integrated (static): "exponential"
-        (`jaxgrid.dynamics.exponential_heun`) or "rosenbrock" (`rosenbrock_heun`); the
-        environment sets it from `EnvConfig.motor_step`.
       precision: "float32" or "float64" (static).
       notes: static tuple of strings: what the compiler changed, dropped or warned about.
       bus_names: static name per bus (n_bus,): "Bus<N>" for RAW bus N, and for the internal
@@ -125,11 +136,9 @@ class GridModel:
     load_bus: tuple[int, ...] = struct.field(pytree_node=False)
     omega_b: float = struct.field(pytree_node=False)
     pq_break: float = struct.field(pytree_node=False)
-    sweeps: int = struct.field(pytree_node=False)
     precision: str = struct.field(pytree_node=False)
     notes: tuple[str, ...] = struct.field(pytree_node=False)
     bus_names: tuple[str, ...] = struct.field(pytree_node=False, default=())
-    motor_step: str = struct.field(pytree_node=False, default="exponential")
 
     @property
     def n_bus(self) -> int:

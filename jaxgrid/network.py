@@ -122,10 +122,12 @@ def solve(net: Network, fault: Fault, active, source, load_injection: Callable, 
 
     source: (n_source,) machine Norton currents; load_injection maps load-slot voltages
     (n_slot − n_source,) to their injections. `sweeps` (static) >= 1 iterations start from
-    v_guess (n_slot,). Returns (v (n_slot,), current (n_slot,), residual = max |Δv| of the
-    last sweep, p.u.).
+    v_guess (n_slot,); one where there are no load slots (nothing then depends on v).
+    Returns (v (n_slot,), current (n_slot,), residual = max |Δv| of the last sweep, p.u.).
     """
     n_source = source.shape[0]
+    if v_guess.shape[0] == n_source:
+        sweeps = 1
 
     def sweep(v):
         current = jnp.concatenate([source, load_injection(v[n_source:])])

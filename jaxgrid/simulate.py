@@ -2,9 +2,12 @@
 
 One rollout is one jit-compiled function of (model, task); `simulate_batch` vmaps it over a
 batch of tasks (fault bus, times, impedance, load changes), so tasks with different fault
-buses share one compiled step. A rollout whose state becomes non-finite or leaves physical
-bounds is frozen at its last good sample and flagged (`Trajectory.diverged`); the rest of a
-batch is untouched. Everything is differentiable (discrete logic through `jnp.where`).
+buses share one compiled step. How a step is taken is the `jaxgrid.steppers.Solver` value
+(step, sweeps, motor step, coarse step outside the fault window); `advance` runs a span
+(a sample here, an agent step in `jaxgrid.env`) of steps. A rollout whose state becomes
+non-finite or leaves physical bounds is frozen at its last good sample and flagged
+(`Trajectory.diverged`); the rest of a batch is untouched. Everything is differentiable
+(discrete logic through `jnp.where`).
 
 Command line: `python -m experiments.simulate`.
 """
@@ -20,12 +23,11 @@ import numpy as np
 from flax import struct
 
 from jaxgrid import network
-from jaxgrid.checks import Range
 from jaxgrid.batching import vmap_minor
-from jaxgrid.dynamics import (FAMILIES, clip_to_limits, derivatives, exponential_heun,
-                              machine_state, motor_jacobian, rosenbrock_heun, solve_network,
-                              update_loads)
+from jaxgrid.checks import Range
+from jaxgrid.dynamics import FAMILIES, machine_state, solve_network
 from jaxgrid.grid import GridModel, GridState
+from jaxgrid.steppers import Solver, fault_active, heun_step, motor_jacobian
 
 
 OBSERVE_SWEEPS = 4  # network sweeps of a sample (`observe`): the accuracy reference's
@@ -60,7 +62,6 @@ class LoadChange:
     fraction: float
 
 
-DT = Range(1e-4, 0.05, "s")  # simulation steps this integrator is meant for (2-5 ms usual)
 POSITIVE = Range(0.0, 1e6, lo_open=True)
 
 
@@ -155,67 +156,6 @@ def stack_tasks(tasks: Sequence[Task]) -> Task:
     return jax.tree.map(lambda *a: np.stack(a), *tasks)
 
 
-def _is_on(t, start, dt):
-    """1.0 from `start` on, with event times rounded to the step grid."""
-    return (t >= start - 0.5 * dt).astype(t.dtype)
-
-
-def clip_closed(x, low, high):
-    """jnp.clip(x, low, high) whose gradient is 1 on the closed range [low, high] (jnp.clip's
-    is ½ or 0 at a bound, which hides the gradient of shedding from "no shedding")."""
-    return jnp.where((x >= low) & (x <= high), x, jnp.clip(x, low, high))
-
-
-def shed(load_left, slot, fraction):
-    """Connected fractions (n_load,) after shedding `fraction` (k,) at load slots `slot` (k,).
-
-    Clipped to [0, 1] per slot (spec acmtblu1 §9): a request beyond what remains sheds
-    what remains.
-    """
-    return clip_closed(load_left - jnp.zeros_like(load_left).at[slot].add(fraction), 0.0, 1.0)
-
-
-def scheduled_shedding(task: Task, x: GridState, t, dt) -> GridState:
-    """x with the task's load changes that fall due at the step starting at t applied."""
-    due = _is_on(t, task.load_time, dt) * (1.0 - _is_on(t - dt, task.load_time, dt))
-    return x.replace(load_left=shed(x.load_left, task.load_slot, task.load_fraction * due))
-
-
-def fault_active(task: Task, t, dt):
-    """1.0 while the fault is on at time t, else 0.0."""
-    return _is_on(t, task.fault_start, dt) * (1.0 - _is_on(t, task.fault_end, dt))
-
-
-def heun_step(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault,
-              jacobian=None):
-    """One modified-Euler (Heun) step from t to t + dt; returns (state, network residual).
-
-    Stiff induction-motor states are advanced by the exponential form of the same step
-    (`jaxgrid.dynamics.exponential_heun`), or, with model.motor_step "rosenbrock", each
-    motor's states together by a linearly implicit step (`jaxgrid.dynamics.rosenbrock_heun`)
-    with `jacobian` (`jaxgrid.dynamics.motor_jacobian`, e.g. held from an earlier state;
-    None: evaluated at x).
-    Scheduled load changes apply at the start of the step; the load models' discrete logic
-    advances after the corrector from the corrector's network voltages.
-    """
-    x = scheduled_shedding(task, x, t, dt)
-
-    def rates(states, v, time):
-        return derivatives(model, x.with_integrated(states, v), fault,
-                           fault_active(task, time, dt))
-
-    if model.motor_step == "rosenbrock":
-        predict, correct = rosenbrock_heun(model, x, dt, jacobian)
-    else:
-        predict, correct = exponential_heun(model, x, dt)
-    s0 = x.integrated()
-    k1, v1, r1 = rates(s0, x.v, t)
-    predicted = clip_to_limits(model, predict(s0, k1))
-    k2, v2, r2 = rates(predicted, v1, t + dt)
-    new = clip_to_limits(model, correct(s0, predicted, k1, k2))
-    return update_loads(model, x.with_integrated(new, v2), x.v, dt), jnp.maximum(r1, r2)
-
-
 def within_bounds(x: GridState, bounds: Bounds):
     """() bool: every state finite, speeds and voltages inside `bounds`."""
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in jax.tree.leaves(x)]))
@@ -223,8 +163,8 @@ def within_bounds(x: GridState, bounds: Bounds):
             & jnp.all(jnp.abs(x.v) <= bounds.max_voltage))
 
 
-def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: network.Fault,
-            buses=None):
+def observe(model: GridModel, x: GridState, t, solver: Solver, task: Task,
+            fault: network.Fault, buses=None):
     """(vm (n_bus,), va (n_bus,), Δω (n_gen,), δ (n_gen,), load_left, load_flags) at time t;
     with `buses` (static (k,) bus indices) vm and va of those buses only, (k,).
 
@@ -232,18 +172,19 @@ def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: net
     fault's start or clearing sees the new topology from the warm start of the step before,
     which one or two sweeps leave far from converged (this costs one solution per sample).
     """
-    v = bus_voltage_sets(model, x, t, dt, task, fault, buses)[0]
+    v = bus_voltage_sets(model, x, t, solver, task, fault, buses)[0]
     return (jnp.abs(v), jnp.angle(v), machine_state(x, "dw"), machine_state(x, "delta"),
             x.load_left, x.load_flags)
 
 
-def bus_voltage_sets(model: GridModel, x: GridState, t, dt: float, task: Task,
+def bus_voltage_sets(model: GridModel, x: GridState, t, solver: Solver, task: Task,
                      fault: network.Fault, *bus_sets):
     """Complex bus voltages at time t, one array per static index set of `bus_sets` ((k,)
     bus indices, or None for all buses), from one network solution (as `observe`); each set's
     rows of the product are computed apart, so adding a set leaves the others' rounding."""
-    active = fault_active(task, t, dt)
-    _, current, _, _ = solve_network(model, x, fault, active, max(model.sweeps, OBSERVE_SWEEPS))
+    active = fault_active(task, t, solver.dt)
+    _, current, _, _ = solve_network(model, x, fault, active,
+                                     max(solver.sweeps, OBSERVE_SWEEPS))
     return tuple(network.bus_voltages(model.network, fault, active, current, buses)
                  for buses in bus_sets)
 
@@ -291,21 +232,21 @@ def initial_health(model: GridModel) -> Health:
                                  .astype(real))
 
 
-def integrate(model: GridModel, x: GridState, residual, t0, n, dt: float, task: Task,
+def integrate(model: GridModel, x: GridState, residual, t0, n, solver: Solver, task: Task,
               fault: network.Fault, jacobian=None):
-    """n Heun steps of dt seconds from time t0 (s, traced); (state, largest residual so far).
+    """n Heun steps of solver.dt from time t0 (s, traced); (state, largest residual so far).
 
-    n static: a `lax.scan` (differentiable); n traced (e.g. 0 or a whole agent step, chosen
-    per rollout: `LoadSheddingEnv`'s coarse step): a `lax.while_loop`, forward mode only.
-    With model.motor_step "rosenbrock" the motors' Jacobian is evaluated once, at x (or
-    given, `jaxgrid.dynamics.motor_jacobian`), and held for the n steps (`heun_step`).
+    n static: a `lax.scan` (differentiable); n traced (e.g. 0 or a whole span, chosen per
+    rollout: `advance`'s coarse step): a `lax.while_loop`, forward mode only. With
+    solver.motor_step "rosenbrock" the motors' Jacobian is evaluated once, at x (or given,
+    `jaxgrid.steppers.motor_jacobian`), and held for the n steps (`heun_step`).
     """
-    if jacobian is None and model.motor_step == "rosenbrock":
+    if jacobian is None and solver.implicit:
         jacobian = motor_jacobian(model, x)
 
     def step(j, carry):
         x, residual = carry
-        new, r = heun_step(model, x, t0 + j * dt, dt, task, fault, jacobian)
+        new, r = heun_step(model, x, t0 + j * solver.dt, solver, task, fault, jacobian)
         return new, jnp.maximum(residual, r)
 
     return jax.lax.fori_loop(0, n, step, (x, residual))
@@ -322,35 +263,55 @@ def checked(x: GridState, new: GridState, health: Health, residual, t_end, bound
                      jnp.where(keep, health.residual, residual))
 
 
-def advance(model: GridModel, x: GridState, health: Health, t0, n: int, dt: float,
-            task: Task, fault: network.Fault, bounds: Bounds):
-    """n Heun steps (static) from time t0 (s); (state, health) after them.
+def advance(model: GridModel, x: GridState, health: Health, t0, span: float, solver: Solver,
+            task: Task, fault: network.Fault, bounds: Bounds, done=None):
+    """(state, health) `span` s (static, a whole number of steps) after x at t0 (s).
 
-    Divergence is checked once, after the n steps (an agent step or an output sample), not
-    at every step (`checked`).
+    Without solver.coarse_dt: span/dt steps of dt. With it: those steps if the span
+    overlaps the fault window (`Solver.in_fault_window`), else span/coarse_dt steps of
+    coarse_dt with coarse_sweeps network sweeps; one of the two loops runs, both holding the
+    motors' Jacobian at x, evaluated once. There a finished rollout (`done`, () bool) takes
+    no steps: vmapped, the two step loops run as long as their longest member, and a rollout
+    frozen inside the fault window would otherwise keep the fine loop running for the whole
+    batch. Divergence is checked once, after the span (an agent step or an output sample),
+    not at every step (`checked`).
     """
-    new, residual = integrate(model, x, health.residual, t0, n, dt, task, fault)
-    t_end = (t0 + n * dt).astype(model.network.real_dtype)
-    return checked(x, new, health, residual, t_end, bounds)
+    if solver.coarse_dt is None:
+        n = solver.steps(span)
+        new, residual = integrate(model, x, health.residual, t0, n, solver, task, fault)
+        t_end = (t0 + n * solver.dt).astype(model.network.real_dtype)
+        return checked(x, new, health, residual, t_end, bounds)
+    window = solver.in_fault_window(t0, span, task)
+    running = True if done is None else ~done
+    fine, slow = window & running, ~window & running
+    coarse = solver.coarse()
+    jacobian = motor_jacobian(model, x) if solver.implicit else None
+    new, residual = integrate(model, x, health.residual, t0,
+                              jnp.where(fine, solver.steps(span), 0), solver, task, fault,
+                              jacobian)
+    new, residual = integrate(model, new, residual, t0, jnp.where(slow, coarse.steps(span), 0),
+                              coarse, task, fault, jacobian)
+    return checked(x, new, health, residual, t0 + span, bounds)
 
 
-@partial(jax.jit, static_argnames=("n_samples", "decimation", "dt", "bounds"))
-def trajectory(model: GridModel, task: Task, n_samples: int, decimation: int, dt: float,
+@partial(jax.jit, static_argnames=("n_samples", "decimation", "solver", "bounds"))
+def trajectory(model: GridModel, task: Task, n_samples: int, decimation: int, solver: Solver,
                bounds: Bounds = Bounds()) -> Trajectory:
-    """Simulate n_samples × decimation steps of dt seconds; sample every `decimation` steps."""
+    """Simulate n_samples × decimation steps of solver.dt; sample every `decimation` steps."""
     fault = network.fault_view(model.network, task.fault_bus, task.fault_z)
     real = model.network.real_dtype
+    dt = solver.dt
 
     def sample(carry, k):
         x, h = carry
         n0 = k * decimation
         x, h = advance(model, x, h.replace(residual=jnp.zeros((), real)), n0.astype(real) * dt,
-                       decimation, dt, task, fault, bounds)
+                       decimation * dt, solver, task, fault, bounds)
         t = (n0 + decimation).astype(real) * dt
-        return (x, h), observe(model, x, t, dt, task, fault) + (h.residual,)
+        return (x, h), observe(model, x, t, solver, task, fault) + (h.residual,)
 
     x0 = model.initial
-    first = observe(model, x0, jnp.zeros((), real), dt, task, fault) + (jnp.zeros((), real),)
+    first = observe(model, x0, jnp.zeros((), real), solver, task, fault) + (jnp.zeros((), real),)
     (x, health), samples = jax.lax.scan(sample, (x0, initial_health(model)),
                                         jnp.arange(n_samples))
     vm, va, speed, angle, left, flags, residual = jax.tree.map(
@@ -361,27 +322,39 @@ def trajectory(model: GridModel, task: Task, n_samples: int, decimation: int, dt
                       diverged_at=health.diverged_at, final=x)
 
 
-def _samples(t_end: float, dt: float, decimation: int) -> int:
-    if DT.problem(dt):
-        raise ValueError(f"dt = {dt!r} s: allowed range is {DT} (2-5 ms is usual)")
+def _solver(solver: Solver | float) -> Solver:
+    """`solver`, or Solver(dt=solver) for a step alone (s); ValueError for a coarse step,
+    which only an environment's agent steps use (`jaxgrid.env`)."""
+    solver = solver if isinstance(solver, Solver) else Solver(dt=float(solver))
+    if solver.coarse_dt is not None:
+        raise ValueError(f"coarse_dt = {solver.coarse_dt}: a simulation samples at dt "
+                         "throughout; the coarse step is an environment's (its agent steps)")
+    return solver
+
+
+def _samples(t_end: float, solver: Solver, decimation: int) -> int:
     if not isinstance(decimation, int) or decimation < 1:
         raise ValueError(f"decimation = {decimation!r}: must be an int >= 1")
     Range(0.0, 3600.0, "s", lo_open=True).check("t_end", t_end)
-    return max(1, int(round(t_end / (dt * decimation))))
+    return max(1, int(round(t_end / (solver.dt * decimation))))
 
 
-def simulate(model: GridModel, t_end: float, dt: float = 0.005,
+def simulate(model: GridModel, t_end: float, solver: Solver | float = Solver(),
              fault: FaultEvent | None = None, load_changes: Sequence[LoadChange] = (),
              decimation: int = 1, bounds: Bounds = Bounds()) -> Trajectory:
-    """One rollout of `t_end` seconds (rounded to whole samples) with the given events."""
+    """One rollout of `t_end` seconds (rounded to whole samples) with the given events, by
+    `solver` (or its step dt alone, s)."""
     task = make_task(model, fault, load_changes)
-    return simulate_batch(model, task, t_end, dt, decimation, bounds, batched=False)
+    return simulate_batch(model, task, t_end, solver, decimation, bounds, batched=False)
 
 
-def simulate_batch(model: GridModel, tasks: Task, t_end: float, dt: float = 0.005,
-                   decimation: int = 1, bounds: Bounds = Bounds(), batched: bool = True):
-    """Rollouts of a batch of tasks (leading axis on every Task field), vmapped."""
-    n = _samples(t_end, dt, decimation)
-    run = partial(trajectory, n_samples=n, decimation=decimation, dt=float(dt), bounds=bounds)
+def simulate_batch(model: GridModel, tasks: Task, t_end: float,
+                   solver: Solver | float = Solver(), decimation: int = 1,
+                   bounds: Bounds = Bounds(), batched: bool = True):
+    """Rollouts of a batch of tasks (leading axis on every Task field), vmapped, by `solver`
+    (or its step dt alone, s)."""
+    solver = _solver(solver)
+    n = _samples(t_end, solver, decimation)
+    run = partial(trajectory, n_samples=n, decimation=decimation, solver=solver, bounds=bounds)
     with jax.enable_x64(model.precision == "float64"):
         return vmap_minor(run, in_axes=(None, 0))(model, tasks) if batched else run(model, tasks)

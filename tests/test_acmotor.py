@@ -25,7 +25,8 @@ from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.models.acmotor import Acmtblu1, MotorOptions
 from jaxgrid.models.base import ModelError
-from jaxgrid.simulate import FaultEvent, make_task, shed, simulate, simulate_batch, stack_tasks
+from jaxgrid.simulate import FaultEvent, make_task, simulate, simulate_batch, stack_tasks
+from jaxgrid.steppers import shed
 
 DT = 0.002  # s, the PNNL 39-bus step
 # The PNNL 39-bus ACMTBLU1 CONs (IEEE39bus_3AC.dyr), in CON order.

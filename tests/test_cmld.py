@@ -13,7 +13,7 @@
 5. The original study's 300-bus files compile in strict mode and their task files' 46
    action buses `Bus<N>_loadBus` are load slots of the compiled model.
 6. The motors' step: at 25 ms the motors' own mode makes the exponential step unstable and
-   the linearly implicit one (`jaxgrid.dynamics.rosenbrock_heun`) stable; a voltage dip at
+   the linearly implicit one (`jaxgrid.steppers.rosenbrock_heun`) stable; a voltage dip at
    25 ms with it follows the same system at 1 ms.
 The long runs (10-s faults on the 300-bus system, the 2000-bus case, speed) are in
 `experiments/bench/cmld.py`.
@@ -34,6 +34,7 @@ from conftest import raw_v33
 from jaxgrid import network
 from jaxgrid.compile import CompileOptions, InitWarning, compile_model
 from jaxgrid.dynamics import derivatives, load_injection, solve_network, update_loads
+from jaxgrid.steppers import Solver
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import RawWarning, read_raw
 from jaxgrid.models.acmotor import Acmtblu1
@@ -46,6 +47,7 @@ from jaxgrid.powerflow import solve
 from jaxgrid.models.induction import Cim5bl
 
 DT = 0.002  # s, the study's InterPSS step
+SWEEPS = Solver().sweeps  # network sweeps of a solution (the simulator's default)
 SBASE, F_NOM = 100.0, 60.0
 REST_TOL = 1e-9  # float64 |derivative| at rest: network-solve round-off (~1e-13 p.u.)
                  # times rates up to ~1e3/s (slip rotation ωb·s, 1/T'0); cf. test_induction
@@ -163,7 +165,7 @@ def test_study_observation_count_with_the_load_buses(shared_cases):
 def test_initialised_at_rest_and_drawing_the_power_flow_load(system):
     x0 = system.initial
     fault = network.fault_view(system.network, 0, 1.0)
-    rates, v, residual = derivatives(system, x0, fault, 0.0)
+    rates, v, residual = derivatives(system, x0, fault, 0.0, SWEEPS)
     worst = max(float(np.abs(np.asarray(r)).max()) for group in rates for d in group
                 for r in d.values())
     assert worst < REST_TOL, f"largest |derivative| at t = 0 is {worst:.2e}"
@@ -174,7 +176,7 @@ def test_initialised_at_rest_and_drawing_the_power_flow_load(system):
             continue
         change = np.abs(np.asarray(value) - np.asarray(x0.load_flags[0][name])).max()
         assert change < 1e-12, f"{name} moves by {change:.2e} in the first step at rest"
-    _, current, _, _ = solve_network(system, x0, fault, 0.0)
+    _, current, _, _ = solve_network(system, x0, fault, 0.0, SWEEPS)
     vb = np.asarray(network.bus_voltages(system.network, fault, 0.0, current))
     p = system.loads[0].params
     v_sys, v_low = vb[1], vb[2]
@@ -192,7 +194,7 @@ def test_interpss_reading_without_feeder_compensation_starts_at_rest(tmp_path, s
     # the static load's Q is no longer P·tan(acos PFs): it closes the balance (spec §6)
     assert abs(p["q_st0"][0] - p["p_st0"][0] * np.tan(np.arccos(0.997)) * -1) > 1e-3
     rates, _, _ = derivatives(model, model.initial, network.fault_view(model.network, 0, 1.0),
-                              0.0)
+                              0.0, SWEEPS)
     worst = max(float(np.abs(np.asarray(r)).max()) for group in rates for d in group
                 for r in d.values())
     assert worst < REST_TOL
@@ -408,9 +410,8 @@ def test_end_use_shedding_scales_every_component(system):
 
 def converged_bus_voltages(model, x):
     """All bus voltages (n_bus,) of the network solution at state x, sweeps to convergence."""
-    model = dataclasses.replace(model, sweeps=80)
     fault = network.fault_view(model.network, 0, 1.0)
-    _, current, residual, _ = solve_network(model, x, fault, 0.0)
+    _, current, residual, _ = solve_network(model, x, fault, 0.0, 80)
     assert float(residual) < NET_TOL, f"sweeps did not converge ({float(residual):.1e})"
     return np.asarray(network.bus_voltages(model.network, fault, 0.0, current))
 
@@ -512,17 +513,18 @@ def test_ieee300_composite_loads_start_at_rest(ieee300):
 COARSE_DT = 0.025  # s: a coarse step of the PNNL 300-bus study (`[env] coarse_dt`)
 
 
-def step_map_radius(model, dt):
+def step_map_radius(model, solver):
     """Spectral radius of one step's Jacobian (∂x_{n+1}/∂x_n) at the operating point."""
     from jax.flatten_util import ravel_pytree
-    from jaxgrid.simulate import heun_step, make_task
+    from jaxgrid.simulate import make_task
+    from jaxgrid.steppers import heun_step
 
     x = model.initial
     flat, unravel = ravel_pytree(x.integrated())
     task, fault = make_task(model), network.fault_view(model.network, 0, 1.0)
 
     def step(s):
-        new, _ = heun_step(model, x.with_integrated(unravel(s), x.v), jnp.zeros(()), dt,
+        new, _ = heun_step(model, x.with_integrated(unravel(s), x.v), jnp.zeros(()), solver,
                            task, fault)
         return ravel_pytree(new.integrated())[0]
 
@@ -533,19 +535,20 @@ def test_rosenbrock_motor_step_makes_the_coarse_step_stable(system):
     """The linearised step at 25 ms: exponential Heun amplifies the motors' own mode (about
     −27 ± 85j 1/s) by 1.42 per step; with each motor's E', ψk and speed stepped together by
     ROS2 no mode grows (the largest is the machine angle's neutral 1, to rounding)."""
-    assert step_map_radius(system, COARSE_DT) > 1.3
-    assert step_map_radius(system.replace(motor_step="rosenbrock"), COARSE_DT) < 1.0 + 1e-9
+    assert step_map_radius(system, Solver(COARSE_DT)) > 1.3
+    assert step_map_radius(system, Solver(COARSE_DT, motor_step="rosenbrock")) < 1.0 + 1e-9
 
 
 DIP = dict(bus=2, start=0.5, duration=0.1, x=0.5)  # a 0.1-s dip to 0.87 p.u., no relay acts
 
 
-def dip_run(model, dt, sample):
+def dip_run(model, solver, sample):
     """(vm (n_t, n_bus) p.u. every `sample` s, final motor A-C speeds p.u.) of 3 s with `DIP`;
     the simulator evaluates a Rosenbrock step's Jacobian once per sample and holds it."""
     from jaxgrid.simulate import FaultEvent, simulate
 
-    trajectory = simulate(model, 3.0, dt, FaultEvent(**DIP), decimation=int(round(sample / dt)))
+    trajectory = simulate(model, 3.0, solver, FaultEvent(**DIP),
+                          decimation=int(round(sample / solver.dt)))
     speeds = [np.asarray(trajectory.final.loads[0][f"m{m}_w"]) for m in "abc"]
     return np.asarray(trajectory.vm), np.concatenate(speeds)
 
@@ -553,7 +556,7 @@ def dip_run(model, dt, sample):
 @pytest.fixture(scope="module")
 def dip_reference(system):
     """`dip_run` of the float64 system at 1 ms, 50-ms samples."""
-    return dip_run(system, 0.001, 0.05)
+    return dip_run(system, Solver(0.001), 0.05)
 
 
 @pytest.mark.parametrize("sample", [0.05, 0.1])
@@ -576,10 +579,10 @@ def test_rosenbrock_motor_step_follows_a_voltage_dip(system, dip_reference, samp
     start, end = DIP["start"], DIP["start"] + DIP["duration"]
     after = lambda event: (t > event - 1e-9) & (t < event + 0.06)  # noqa: E731
     events, settled = after(start) | after(end), t > end + 0.2 - 1e-9
-    vm, speed = dip_run(system.replace(motor_step="rosenbrock"), COARSE_DT, sample)
+    vm, speed = dip_run(system, Solver(COARSE_DT, motor_step="rosenbrock"), sample)
     error = np.abs(vm - vm_ref)
     assert error[~events].max() < 1e-2
     assert error[settled].max() < 1e-3
     np.testing.assert_allclose(speed, speed_ref, atol=1e-9)
-    vm_plain, _ = dip_run(system, COARSE_DT, sample)
+    vm_plain, _ = dip_run(system, Solver(COARSE_DT), sample)
     assert np.abs(vm_plain - vm_ref)[settled].max() > 1e-2

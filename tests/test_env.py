@@ -302,9 +302,11 @@ def test_coarse_step_is_used_outside_the_fault_window(study, tasks):
     at dt, every other one at coarse_dt."""
     env = study.env(episode=6.0, coarse_dt=0.02, fine_window=1.0)
     fault = tasks[2]  # 1.0-1.08 s: fine from 1.0 s to 2.08 s
-    assert env.config.coarse_steps == 5
+    solver, agent_dt = env.config.solver, env.config.agent_dt
+    assert solver.coarse().steps(agent_dt) == 5
     for t, fine in ((0.0, False), (0.9, False), (1.0, True), (2.0, True), (2.1, False)):
-        assert bool(env.config.in_fault_window(jnp.asarray(t, jnp.float32), fault)) == fine, t
+        window = solver.in_fault_window(jnp.asarray(t, jnp.float32), agent_dt, fault)
+        assert bool(window) == fine, t
 
 
 def test_a_finished_episode_takes_no_coarse_or_fine_steps(study, grid, tasks):

@@ -1,5 +1,5 @@
-"""Stiff induction-motor states: the exponential Heun step (`jaxgrid.dynamics.exponential_heun`)
-and the linearly implicit motor step (`jaxgrid.dynamics.rosenbrock_heun`).
+"""Stiff induction-motor states: the exponential Heun step (`jaxgrid.steppers.exponential_heun`)
+and the linearly implicit motor step (`jaxgrid.steppers.rosenbrock_heun`).
 
 References: the φ functions against NumPy's complex128 exponential; the block solver against
 NumPy's LU solve; the motor block's Jacobian against `jax.jacfwd` of one motor; the whole
@@ -16,7 +16,7 @@ import pytest
 import jax
 import jax.numpy as jnp
 
-from jaxgrid.dynamics import lu_solver, phi_functions
+from jaxgrid.steppers import Solver, lu_solver, phi_functions
 
 MOTOR = ("1  0.01 0.1  3.0  0.02  0.12  0 0  0 0 0 0  0  1.3  0.4  0 0 0  "  # VI = 0: no trip
          "0.0 0")  # D = 0: constant load torque, so the motor stalls in a long fault
@@ -63,7 +63,7 @@ def kundur_with_motor(tmp_path_factory):
 def _run(model, dt, motor_step="exponential"):
     from jaxgrid.simulate import FaultEvent, simulate
 
-    traj = simulate(model.replace(motor_step=motor_step), T_END, dt, FaultEvent(**FAULT),
+    traj = simulate(model, T_END, Solver(dt, motor_step=motor_step), FaultEvent(**FAULT),
                     decimation=int(round(SAMPLE / dt)))
     speed = np.asarray(traj.final.loads[0]["w"])
     return np.asarray(traj.vm), speed, bool(traj.diverged)
@@ -112,7 +112,7 @@ def test_block_jacobian_is_the_motors_own(kundur_with_motor):
     """`block_jacobian` seeds every block at once; for the motor of the test case it equals
     `jax.jacfwd` of its rates with respect to its five states at a depressed voltage
     (float64, to rounding)."""
-    from jaxgrid.dynamics import _implicit_blocks, block_jacobian
+    from jaxgrid.steppers import _implicit_blocks, block_jacobian
     from jaxgrid.models.base import LoadPorts
 
     model = kundur_with_motor["float64"]

@@ -21,7 +21,7 @@ from jaxgrid.env import EnvParams
 from jaxgrid.episode import play_tasks
 from jaxgrid.io.raw import read_raw
 from jaxgrid.problem import at_point, play_specs, stratified_sampler
-from jaxgrid.study import CompileSettings, builtin, from_files, read_study, write_study
+from jaxgrid.study import builtin, from_files, read_study, write_study
 from jaxgrid.tasks import TaskSet, TaskSpec
 
 BASE = "ieee39/IEEE39bus_multiloads_xfmr4_smallX_v30.raw"
@@ -162,10 +162,9 @@ def test_study_file_round_trip_gives_the_identical_definition(pnnl39, tmp_path):
     for a, b in zip(jax.tree.leaves(again.models), jax.tree.leaves(pnnl39.models)):
         np.testing.assert_array_equal(a, b)
     study = builtin("ieee39_fidvr", (0.9, 1.0), name="mine", params={"c_shed": 50.0},
-                    env={"history": 3, "recovery_buses": (4, 504)},
+                    env={"history": 3, "recovery_buses": (4, 504), "sweeps": 3},
                     tasks={"test": {"fault_buses": (4, 5), "operating_points": (1,)},
-                           "extra": {"fault_buses": (16,), "fault_durations": (0.1,)}},
-                    compile=CompileSettings(sweeps=3))
+                           "extra": {"fault_buses": (16,), "fault_durations": (0.1,)}})
     write_study(study, path)
     assert read_study(path).definition == study.definition
     assert study.task_set("test").fault_durations == (0.02, 0.05, 0.08, 0.1), "kept"
@@ -293,9 +292,11 @@ def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):
     path = tmp_path / "study.toml"
     write_study(pnnl39, path)
     data = tomllib.loads(path.read_text())
-    assert set(data["env"]) == {f.name for f in dataclasses.fields(pnnl39.config)} - {
-        "recovery_buses", "coarse_dt", "coarse_sweeps", "motor_step", "obs_interval"}, \
-        "None fields are left out, every other one is explicit"
+    assert set(data["env"]) == set(pnnl39.config.values()) - {
+        "recovery_buses", "coarse_dt", "coarse_sweeps", "motor_step", "obs_interval",
+        "sweeps"}, "None fields are left out, every other one is explicit"
+    assert data["compile"]["sweeps"] == pnnl39.config.solver.sweeps, \
+        "the solver's sweeps, where study files have always written them"
     assert set(data["params"]) == {f.name for f in dataclasses.fields(EnvParams)}
     assert all(p.startswith("/") for p in data["grid"]["raw"]), "absolute paths"
     assert "builtin" not in data["grid"] and len(data["grid"]["raw"]) == 3
@@ -461,7 +462,7 @@ def test_pnnl_39_bus_study_file_has_the_papers_settings(shared_cases):
     assert {s.operating_point for s in train} == {0} and len(study.tasks("test")) == 120
     assert (study.params.action_low, study.params.action_high) == (-0.2, 0.0)
     assert [study.history(k) for k in ("linear", "fnn", "lstm")] == [10, 10, 1]
-    assert (study.config.dt, study.point(0).sweeps) == (0.002, 1)
+    assert (study.config.dt, study.config.solver.sweeps) == (0.002, 1)
 
 
 def test_pnnl_39_bus_gridpack_study_file_is_the_published_policies_environment(shared_cases):

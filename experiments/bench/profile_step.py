@@ -36,7 +36,8 @@ def profile(name: str, batch: int, calls: int) -> dict:
     study = load_study(name)
     specs = [s for s in study.tasks("train") if s.operating_point == 0]
     tasks = study.batch([specs[k % len(specs)] for k in range(batch)]).task
-    result = {"study": name, **profile_model(study.point(0), study.config.dt, tasks, calls)}
+    result = {"study": name, **profile_model(study.point(0), study.config.solver.fine(), tasks,
+                                                   calls)}
     print(name, result, flush=True)
     return result
 

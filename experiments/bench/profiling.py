@@ -14,9 +14,10 @@ import numpy as np
 from experiments.bench.timing import timed
 from jaxgrid import network
 from jaxgrid.batching import batch_last
-from jaxgrid.dynamics import (axpy, clip_to_limits, derivatives, load_injection, solve_network,
+from jaxgrid.dynamics import (clip_to_limits, derivatives, load_injection, solve_network,
                               update_loads)
-from jaxgrid.simulate import Bounds, heun_step, within_bounds
+from jaxgrid.simulate import Bounds, within_bounds
+from jaxgrid.steppers import Solver, axpy, heun_step
 
 NOT_KERNELS = {"parameter", "constant", "tuple", "get-tuple-element", "bitcast"}
 STEPS_PER_CALL = 50
@@ -53,9 +54,10 @@ def _best_us(fn, args, calls: int, rollout_steps: int) -> float:
     return 1e6 * min(timed(lambda: fn(*args))[1] for _ in range(calls)) / rollout_steps
 
 
-def profile_model(model, dt: float, tasks, calls: int) -> dict:
-    """Kernels and µs per rollout-step of `model` at step dt (s) on a batch of `tasks`
-    (leading axis), during the fault (module docstring)."""
+def profile_model(model, solver: Solver, tasks, calls: int) -> dict:
+    """Kernels and µs per rollout-step of `model` stepped by `solver` (at its dt) on a batch
+    of `tasks` (leading axis), during the fault (module docstring)."""
+    dt, sweeps = solver.dt, solver.sweeps
     batch = int(tasks.fault_bus.shape[0])
     states = jax.tree.map(lambda a: np.broadcast_to(a, (batch,) + a.shape), model.initial)
     t_fault = np.float32(np.max(tasks.fault_start) + 0.5 * dt)
@@ -64,17 +66,17 @@ def profile_model(model, dt: float, tasks, calls: int) -> dict:
         return network.fault_view(model.network, task.fault_bus, task.fault_z)
 
     def euler(model, x, fault):
-        dx, v, _ = derivatives(model, x, fault, 1.0)
+        dx, v, _ = derivatives(model, x, fault, 1.0, sweeps)
         return x.with_integrated(axpy(dt, dx, x.integrated()), v)
 
     def one_step(model, x, task):
-        return heun_step(model, x, t_fault, dt, task, fault_of(model, task))[0]
+        return heun_step(model, x, t_fault, solver, task, fault_of(model, task))[0]
 
     # each component fed back into the state, so a loop of them is not hoisted
     components = {
         "step": one_step,
         "solve": lambda model, x, task: x.replace(
-            v=solve_network(model, x, fault_of(model, task), 1.0)[0]),
+            v=solve_network(model, x, fault_of(model, task), 1.0, sweeps)[0]),
         "load_currents": lambda model, x, task: x.replace(v=x.v.at[model.n_gen:].set(
             load_injection(model, x, x.v[model.n_gen:]))),
         "product": lambda model, x, task: x.replace(v=network.times(model.network.zr_ss, x.v)),
@@ -103,10 +105,9 @@ def profile_model(model, dt: float, tasks, calls: int) -> dict:
              "load models' discrete update": times["loads_us"] / times["step_us"],
              "limit clips (2)": 2 * times["clip_us"] / times["step_us"]}
     share["rest (state updates, events, copies)"] = 1 - sum(share.values())
-    sweeps = 2 * model.sweeps  # per step
-    share["of which load injections"] = sweeps * times["load_currents_us"] / times["step_us"]
-    share["of which impedance products"] = sweeps * times["product_us"] / times["step_us"]
+    share["of which load injections"] = 2 * sweeps * times["load_currents_us"] / times["step_us"]
+    share["of which impedance products"] = 2 * sweeps * times["product_us"] / times["step_us"]
     return {"batch": batch, "dt_s": dt, "n_slot": len(model.slot_bus),
-            "sweeps": model.sweeps, "kernels_per_step": kernels(step_text),
+            "sweeps": sweeps, "kernels_per_step": kernels(step_text),
             "us_per_rollout_step": {k: round(v, 3) for k, v in times.items()},
             "share_of_step": {k: round(v, 3) for k, v in share.items()}}

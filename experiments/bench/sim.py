@@ -36,8 +36,8 @@ from jaxgrid import network
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
-from jaxgrid.simulate import (FaultEvent, heun_step, make_task, simulate_batch,
-                              stack_tasks)
+from jaxgrid.simulate import FaultEvent, make_task, simulate_batch, stack_tasks
+from jaxgrid.steppers import Solver, heun_step
 
 T_END, DT, SAMPLE = 10.0, 0.005, 0.1  # s
 LOAD_BUSES = ()  # no controllable loads in the file cases: see the module docstring
@@ -59,21 +59,22 @@ CASES = {  # name: (raw, dyr, models dropped for both simulators)
 }
 
 
-def step_compile_seconds(model, dt: float) -> float:
+def step_compile_seconds(model, solver: Solver) -> float:
     """Seconds to lower and compile one Heun step of `model` (no run)."""
     task = make_task(model, FaultEvent(model.bus_numbers[0], 1.0, 0.1))
     fault = network.fault_view(model.network, task.fault_bus, task.fault_z)
-    step = jax.jit(heun_step, static_argnames=("dt",))
+    step = jax.jit(heun_step, static_argnames=("solver",))
     start = time.perf_counter()
-    step.lower(model, model.initial, np.float32(0.0), dt=dt, task=task, fault=fault).compile()
+    step.lower(model, model.initial, np.float32(0.0), solver=solver, task=task,
+               fault=fault).compile()
     return time.perf_counter() - start
 
 
 def load_case(name: str):
-    """(model, dt s, (raw, dyr) files for ANDES or None) of a benchmark case."""
+    """(model, solver, (raw, dyr) files for ANDES or None) of a benchmark case."""
     if name in STUDY_CASES:
         study = load_study(name)
-        return study.point(0), study.config.dt, None
+        return study.point(0), study.config.solver.fine(), None
     raw_fn, dyr_fn, drop = CASES[name]
     folder = tempfile.mkdtemp()
     dyr = write_psse_dyr(str(dyr_fn()), os.path.join(folder, f"{name}.dyr"), drop)
@@ -82,24 +83,25 @@ def load_case(name: str):
         warnings.simplefilter("ignore")
         model = compile_model(read_raw(raw), read_dyr(dyr),
                               CompileOptions(strict=False, load_buses=LOAD_BUSES))
-    return model, DT, (raw, dyr)
+    return model, Solver(dt=DT), (raw, dyr)
 
 
 def bench_case(name: str, batch_sizes, device_counts, repeats: int, with_andes: bool) -> dict:
     start = time.perf_counter()
-    model, dt, files = load_case(name)
+    model, solver, files = load_case(name)
+    dt = solver.dt
     decimation = int(round(SAMPLE / dt))
     result = {"case": name, "n_bus": model.n_bus, "n_gen": model.n_gen,
               "n_slot": len(model.slot_bus), "n_motor": sum(len(g.index) for g in model.loads),
               "dt_s": dt, "model_compile_s": round(time.perf_counter() - start, 3),
-              "step_compile_s": round(step_compile_seconds(model, dt), 3), "runs": []}
+              "step_compile_s": round(step_compile_seconds(model, solver), 3), "runs": []}
     # fault buses: the machines' buses excluded, cycling over the rest
     candidates = [b for b in model.bus_numbers if b > 0 and b not in model.gen_bus]
     faults = [make_task(model, FaultEvent(candidates[k % len(candidates)], 1.0, 0.1))
               for k in range(max(batch_sizes))]
     for n_dev, batch, out, first, warm in sharded_timings(
             batch_sizes, device_counts, repeats, lambda batch: stack_tasks(faults[:batch]),
-            lambda tasks: simulate_batch(model, tasks, T_END, dt, decimation)):
+            lambda tasks: simulate_batch(model, tasks, T_END, solver, decimation)):
         row = {"devices": n_dev, "batch": batch, "first_call_s": round(first, 3),
                "warm_s": round(warm, 4), "rollouts_per_s": round(batch / warm, 2),
                "sim_s_per_wall_s": round(batch * T_END / warm, 1),

@@ -96,9 +96,9 @@ def main(argv: list[str] | None = None) -> int:
                              f"points (0 to {study.n_points - 1})")
         model = study.point(args.point)
         fault = FaultEvent(args.fault_bus, args.fault_start, args.fault_duration)
-        dt = study.config.dt
-        traj = simulate(model, args.t_end, dt, fault=fault,
-                        decimation=max(1, int(round(0.01 / dt))))
+        solver = study.config.solver.fine()
+        traj = simulate(model, args.t_end, solver, fault=fault,
+                        decimation=max(1, int(round(0.01 / solver.dt))))
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -7,10 +7,10 @@ small-step, many-sweep reference over the study's training tasks, without contro
         [--reference-precision float64] [--tasks train] [--episode S]
         [--out benchmarks/cpu/step_accuracy.json]
 
-A candidate is a (step, sweeps, coarse step) triple: the coarse step (`EnvConfig.coarse_dt`,
+A candidate is a (step, sweeps, coarse step) triple: the coarse step (`jaxgrid.steppers.Solver.coarse_dt`,
 0 for none) is used outside the fault window, `--fine-window` s after clearing, with
 `--coarse-sweeps` network sweeps (default: the candidate's); `--motor-step` sets how the
-candidates integrate the load models' motors (`EnvConfig.motor_step`; the reference always
+candidates integrate the load models' motors (`Solver.motor_step`; the reference always
 steps them exponentially).
 
 For each candidate it reports, over every task and agent step (0.1 s samples of the observed
@@ -45,9 +45,9 @@ import numpy as np
 
 from baselines.controllers import no_control
 from experiments.common.studyargs import add_study_arguments, study_from_args, summarised_notes
-from jaxgrid.env import MOTOR_STEPS
 from jaxgrid.episode import play
 from jaxgrid.problem import play_specs
+from jaxgrid.steppers import MOTOR_STEPS, Solver
 from jaxgrid.study import Study, rebuild
 
 ACCURACY_P99 = 1e-3  # p.u.: the largest p99 |ΔV| a study's default step may have
@@ -55,13 +55,10 @@ ACCURACY_AT_CHECK = 5e-3  # p.u.: its largest |ΔV| at the recovery check
 STRESS_SHARE = 0.15  # share of the action buses that shed at each agent step under stress
 
 
-def run(study: Study, dt: float, episode: float, tasks: str, coarse_dt: float | None = None,
-        fine_window: float = 1.0, coarse_sweeps: int | None = None,
-        motor_step: str = "exponential"):
+def run(study: Study, solver: Solver, episode: float, tasks: str):
     """(vm (n_task, n_steps, n_observed), recovered (n_task,), warm wall time s) without
-    control at step dt (coarse_dt outside the fault window, None: dt throughout)."""
-    env = study.env(dt=dt, episode=episode, coarse_dt=coarse_dt, fine_window=fine_window,
-                    coarse_sweeps=coarse_sweeps, motor_step=motor_step)
+    control, the grid integrated by `solver`."""
+    env = study.env(solver=solver, episode=episode)
     apply, params, carry = no_control(env)
     specs = study.tasks(tasks)
     play_specs(study, env, apply, params, specs, carry, trace=True)  # compile
@@ -120,18 +117,18 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
     """The report of the module docstring as a dict; a coarse step of 0 means none."""
     episode = episode or study.config.episode
     with summarised_notes():
-        reference = rebuild(study, precision=reference_precision, sweeps=reference_sweeps)
-    vm_ref, ok_ref, _ = run(reference, reference_dt, episode, tasks)
+        reference = rebuild(study, precision=reference_precision)
+        candidate_study = rebuild(study, precision="float32")
+    vm_ref, ok_ref, _ = run(reference, Solver(reference_dt, sweeps=reference_sweeps), episode,
+                            tasks)
     check = check_index(study, tasks, study.config.agent_dt, vm_ref.shape[1])
     rows = []
     for n_sweeps in sweeps:
-        with summarised_notes():
-            candidate_study = rebuild(study, precision="float32", sweeps=n_sweeps)
         for dt, coarse in itertools.product(dts, coarse_dts):
             if coarse and coarse <= dt:
                 continue
-            vm, ok, wall = run(candidate_study, dt, episode, tasks, coarse or None, fine_window,
-                               coarse_sweeps, motor_step)
+            solver = Solver(dt, coarse or None, fine_window, n_sweeps, coarse_sweeps, motor_step)
+            vm, ok, wall = run(candidate_study, solver, episode, tasks)
             error = np.abs(vm - vm_ref)
             at_check = error[np.arange(len(check)), check]
             row = {"dt_s": dt, "sweeps": n_sweeps, "coarse_dt_s": coarse or None,
@@ -141,16 +138,14 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
                    "changed_verdicts": int(np.sum(ok != ok_ref)), "wall_s": wall,
                    "diverged_under_shedding": None, "stress_shed_share": None}
             if stress_rollouts and accurate(row):
-                env = candidate_study.env(dt=dt, episode=episode, coarse_dt=coarse or None,
-                                          fine_window=fine_window, coarse_sweeps=coarse_sweeps,
-                                          motor_step=motor_step)
+                env = candidate_study.env(solver=solver, episode=episode)
                 stress = shedding_stress(candidate_study, env, stress_rollouts)
                 row["diverged_under_shedding"] = stress["diverged"]
                 row["stress_shed_share"] = stress["shed_share"]
             rows.append(row)
-    own = [r for r in rows if r["dt_s"] == study.config.dt
-           and r["sweeps"] == study.definition.compile.sweeps
-           and r["coarse_dt_s"] == study.config.coarse_dt]
+    own_solver = study.config.solver
+    own = [r for r in rows if r["dt_s"] == own_solver.dt and r["sweeps"] == own_solver.sweeps
+           and r["coarse_dt_s"] == own_solver.coarse_dt]
     for row in rows:
         row["time_ratio_to_study_step"] = row["wall_s"] / own[0]["wall_s"] if own else None
     good = [r for r in rows if accurate(r) and not r["diverged_under_shedding"]]
@@ -158,8 +153,8 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
     return {"study": study.name, "tasks": tasks, "n_tasks": len(ok_ref), "episode_s": episode,
             "reference": {"dt_s": reference_dt, "sweeps": reference_sweeps,
                           "precision": reference_precision, "recovered": int(ok_ref.sum())},
-            "study_step": {"dt_s": study.config.dt, "sweeps": study.definition.compile.sweeps,
-                           "coarse_dt_s": study.config.coarse_dt},
+            "study_step": {"dt_s": own_solver.dt, "sweeps": own_solver.sweeps,
+                           "coarse_dt_s": own_solver.coarse_dt},
             "fine_window_s": fine_window, "coarse_sweeps": coarse_sweeps,
             "motor_step": motor_step,
             "stress": {"rollouts": stress_rollouts, "share": STRESS_SHARE,

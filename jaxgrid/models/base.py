@@ -443,6 +443,6 @@ class LoadModel(DeviceModel):
     def implicit_blocks(cls) -> tuple[tuple[str, ...], ...]:
         """Blocks of state names, all of one length, whose rates at a fixed bus voltage
         depend only on the block's own states (one motor's E', ψk and speed): the
-        linearly implicit step (`jaxgrid.dynamics.rosenbrock_heun`) solves each block with
+        linearly implicit step (`jaxgrid.steppers.rosenbrock_heun`) solves each block with
         its own Jacobian. None by default."""
         return ()

@@ -24,9 +24,11 @@ Built three ways:
 
         name = "ieee39_pnnl"
         [grid]      builtin, load_levels | raw, dyr, task_config, sim_config
-        [compile]   strict, precision, sweeps, [compile.motors], [compile.loads]
-        [env]       jaxgrid.env.EnvConfig fields (observed_buses, action_buses, dt, agent_dt,
+        [compile]   strict, precision, sweeps (the solver's), [compile.motors], [compile.loads]
+        [env]       jaxgrid.env.EnvConfig fields (observed_buses, action_buses, agent_dt,
                     episode, history, include_action_status, recovery_buses, [env.bounds])
+                    and its solver's (jaxgrid.steppers.Solver: dt, coarse_dt, fine_window,
+                    coarse_sweeps, motor_step)
         [params]    jaxgrid.env.EnvParams fields (reward weights, action range, recovery)
         [tasks.NAME] jaxgrid.tasks.TaskSet fields (fault_buses, fault_durations,
                     fault_starts, operating_points, fault_r, fault_x)

@@ -4,7 +4,7 @@ stacked into one `GridModel` pytree with a leading operating-point axis.
 
     builtin("ieee39_fidvr", load_levels=(0.9, 1.0))     # a built-in study
     from_files(["a.raw", "b.raw"], "x.dyr", "task.json", "sim.json")
-    rebuild(study, precision="float64", sweeps=4)       # the same study compiled otherwise
+    rebuild(study, precision="float64")                 # the same study compiled otherwise
 """
 from __future__ import annotations
 
@@ -48,14 +48,14 @@ def from_files(raw, dyr, task_config=None, sim_config=None, **overrides) -> Stud
 
 def rebuild(study: Study, **compile_changes) -> Study:
     """`study` built again from its definition with CompileSettings fields changed, e.g.
-    precision="float64", sweeps=4 (a reference model for accuracy checks)."""
+    precision="float64" (a reference model for accuracy checks)."""
     d = study.definition
 
     def fields(value) -> dict:
         return {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
 
     return build(d.grid, name=d.name, compile=dataclasses.replace(d.compile, **compile_changes),
-                 env=fields(d.env), params=fields(d.params),
+                 env=d.env.values(), params=fields(d.params),
                  tasks={k: fields(v) for k, v in d.tasks.items()}, training=fields(d.training))
 
 
@@ -162,7 +162,7 @@ def _definition(source: SourceDefaults, grid: GridSource, name: str | None,
                 training: dict, label: str) -> StudyDefinition:
     """The StudyDefinition of `source` with the overrides, every value checked (InputError
     naming it as written, `_Names`)."""
-    env_values = {**source.env, **env}
+    env_values = {"sweeps": source.sweeps, **source.env, **env}
     for key in ("observed_buses", "action_buses"):
         if key not in env_values:
             raise InputError(f"{label}: env.{key}", None, f" is not set: give a task_config or "
@@ -170,7 +170,7 @@ def _definition(source: SourceDefaults, grid: GridSource, name: str | None,
     env_values["action_buses"] = tuple(env_values["action_buses"])
     env_names = _Names(label, "env", env, source.written)
     with renamed_errors(env_names, env_names.source):
-        config = EnvConfig(**env_values)
+        config = EnvConfig.of(env_values)
     buses = source.buses
     for b in config.action_buses:
         if not buses.loaded.get(b, False):
@@ -202,9 +202,7 @@ def _definition(source: SourceDefaults, grid: GridSource, name: str | None,
     with renamed_errors(training_names, training_names.source):
         settings = TrainingSettings(**{**source.training, **training})
     return StudyDefinition(
-        name=name or source.name, grid=grid,
-        compile=dataclasses.replace(compile, sweeps=compile.sweeps or source.sweeps),
-        env=config, params=EnvParams(**param_values), tasks=task_sets, training=settings)
+        name=name or source.name, grid=grid, compile=compile, env=config, params=EnvParams(**param_values), tasks=task_sets, training=settings)
 
 
 def _compile_options(definition: StudyDefinition) -> CompileOptions:
@@ -212,7 +210,7 @@ def _compile_options(definition: StudyDefinition) -> CompileOptions:
     c = definition.compile
     return CompileOptions(strict=c.strict, loads=c.loads, load_buses=definition.env.action_buses,
                           motors=c.motors, composite=c.composite, precision=c.precision,
-                          sweeps=c.sweeps, machine_base=c.machine_base)
+                          machine_base=c.machine_base)
 
 
 def _check_buses(numbers, buses: BusTable, key: str) -> None:

@@ -16,7 +16,7 @@ import jax
 from jaxgrid.case import Case
 from jaxgrid.checks import InputError, Range, check_each, check_int, check_listed, check_unique
 from jaxgrid.compile import MACHINE_BASE_RULES
-from jaxgrid.env import HISTORY, SWEEPS, EnvConfig, EnvParams, LoadSheddingEnv
+from jaxgrid.env import HISTORY, EnvConfig, EnvParams, LoadSheddingEnv
 from jaxgrid.grid import GridModel
 from jaxgrid.models.acmotor import MotorOptions
 from jaxgrid.models.cmld import CompositeOptions
@@ -72,13 +72,11 @@ PRECISIONS = ("float32", "float64")  # CompileSettings.precision (the time loop'
 @dataclasses.dataclass(frozen=True)
 class CompileSettings:
     """How every operating point is compiled (`jaxgrid.compile.CompileOptions`; the action
-    buses become the load slots). sweeps None: the source's (a built-in study's measured
-    value, `jaxgrid.study.sources.FILE_SWEEPS` for files); a built study's definition holds
-    the value used."""
+    buses become the load slots). How the points are integrated is the environment's
+    solver (`EnvConfig.solver`; a study file writes its sweeps in [compile])."""
 
     strict: bool = True
     precision: str = "float32"
-    sweeps: int | None = None
     machine_base: str = "gridpack"
     motors: MotorOptions = MotorOptions()
     loads: LoadSplit = LoadSplit()
@@ -90,8 +88,6 @@ class CompileSettings:
         for name, allowed in (("precision", PRECISIONS), ("machine_base", MACHINE_BASE_RULES)):
             if getattr(self, name) not in allowed:
                 raise InputError(name, getattr(self, name), f"must be one of {list(allowed)}")
-        if self.sweeps is not None:
-            check_int("sweeps", self.sweeps, SWEEPS)
         for table in ("motors", "loads", "composite"):
             options = getattr(self, table)
             for field in dataclasses.fields(options):
@@ -216,8 +212,9 @@ class Study:
         return self.definition.training.history.get(policy_kind, self.config.history)
 
     def env(self, **config) -> LoadSheddingEnv:
-        """The environment; `config` overrides EnvConfig fields, e.g. episode=6.0 (s)."""
-        return LoadSheddingEnv(self.point(0), dataclasses.replace(self.config, **config))
+        """The environment; `config` overrides EnvConfig or solver fields, e.g. episode=6.0
+        (s), sweeps=4 (`EnvConfig.replace`)."""
+        return LoadSheddingEnv(self.point(0), self.config.replace(**config))
 
     def task_set(self, name: str) -> TaskSet:
         """The named task set; ValueError listing the study's sets."""

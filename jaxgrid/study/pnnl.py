@@ -39,7 +39,7 @@ from pathlib import Path
 
 from jaxgrid.checks import Range, check_each, check_unique
 from jaxgrid.env import AGENT_DT, EPISODE, HISTORY, PARAM_RANGES, check_params
-from jaxgrid.simulate import DT
+from jaxgrid.steppers import DT
 from jaxgrid.tasks import FAULT_IMPEDANCE, FAULT_TIME
 
 # PNNL key -> EnvParams field (unstableReward is negated: EnvParams holds the penalty M).

@@ -55,7 +55,7 @@ class SourceDefaults:
     Attributes:
       name: the study's default name.  points: the operating points (one grid).
       dyr: the dynamic data of every point.  buses: the names the study can use.
-      sweeps: network sweeps when CompileSettings.sweeps is None.
+      sweeps: the solver's network sweeps unless the study sets them (`EnvConfig.solver`).
       env, params, training: {EnvConfig | EnvParams | TrainingSettings field: value}.
       tasks: {set name: {TaskSet field: value}}.
       written: {"section.field": "FILE: key"} of the values read from a file (messages).

@@ -17,12 +17,13 @@ import numpy as np
 import tomli_w
 
 from jaxgrid import cases
-from jaxgrid.checks import InputError
+from jaxgrid.checks import InputError, check_int, renamed_errors
 from jaxgrid.env import EnvConfig, EnvParams
 from jaxgrid.models.acmotor import MotorOptions
 from jaxgrid.models.cmld import CompositeOptions
 from jaxgrid.models.loads import LoadSplit
 from jaxgrid.simulate import Bounds
+from jaxgrid.steppers import SWEEPS, Solver
 from jaxgrid.study.build import build, builtin
 from jaxgrid.study.definition import (CompileSettings, GridSource, Study, StudyDefinition,
                                       TrainingSettings)
@@ -60,8 +61,13 @@ def read_study(path: str | Path, raw=None) -> Study:
     elif "raw" in grid:
         grid["raw"] = [str(p) for file, r in grid["raw"] for p in _paths(file.parent, r, file)]
     source = _typed(GridSource, grid, path, "grid")
-    compile_settings = _typed(CompileSettings, data.get("compile", {}), path, "compile")
-    env = _fields(EnvConfig, data.get("env", {}), path, "env")
+    compile_table = dict(_table(data.get("compile", {}), path, "compile"))
+    sweeps = compile_table.pop("sweeps", None)
+    compile_settings = _typed(CompileSettings, compile_table, path, "compile")
+    env = _fields(_ENV_TYPES, data.get("env", {}), path, "env")
+    if sweeps is not None:  # the solver's: study files write it in [compile]
+        with renamed_errors(lambda field: f"{path}: compile.{field}"):
+            env["sweeps"] = check_int("sweeps", sweeps, SWEEPS)
     params = _fields(EnvParams, data.get("params", {}), path, "params")
     tasks = {name: _fields(TaskSet, values, path, f"tasks.{name}")
              for name, values in _table(data.get("tasks", {}), path, "tasks").items()}
@@ -122,7 +128,24 @@ def write_study(study: Study | StudyDefinition, path: str | Path) -> None:
     """Write the resolved definition as TOML (every field explicit, paths absolute)."""
     definition = study.definition if isinstance(study, Study) else study
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text(tomli_w.dumps(_plain(definition)))
+    Path(path).write_text(tomli_w.dumps(_as_written(_plain(definition))))
+
+
+def _as_written(tables: dict) -> dict:
+    """The definition's tables as study files have always held them: the environment's
+    solver's fields in [env] where the solver stands, but its sweeps in [compile] after
+    precision (the written text, and so the names of run folders, unchanged)."""
+    solver = tables["env"]["solver"]
+    env = {}
+    for key, value in tables["env"].items():
+        env.update({k: v for k, v in solver.items() if k != "sweeps"} if key == "solver"
+                   else {key: value})
+    compile_table = {}
+    for key, value in tables["compile"].items():
+        compile_table[key] = value
+        if key == "precision":
+            compile_table["sweeps"] = solver["sweeps"]
+    return {**tables, "compile": compile_table, "env": env}
 
 
 def _plain(value):
@@ -150,14 +173,21 @@ _NESTED = {"MotorOptions": MotorOptions, "LoadSplit": LoadSplit, "Bounds": Bound
 
 
 def _fields(cls, values, path, key) -> dict:
-    """{field: value} checked against the fields of dataclass `cls` and their types."""
+    """{field: value} checked against the fields of dataclass `cls` (or {field: annotation})
+    and their types."""
     values = _table(values, path, key)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(values) - set(fields))
+    types = cls if isinstance(cls, dict) else {f.name: f.type for f in dataclasses.fields(cls)}
+    unknown = sorted(set(values) - set(types))
     if unknown:
-        raise ValueError(f"{path}: [{key}] unknown keys {unknown}; allowed: {sorted(fields)}")
-    return {name: _coerce(v, fields[name].type, path, f"{key}.{name}")
+        raise ValueError(f"{path}: [{key}] unknown keys {unknown}; allowed: {sorted(types)}")
+    return {name: _coerce(v, types[name], path, f"{key}.{name}")
             for name, v in values.items()}
+
+
+# The keys of [env]: EnvConfig's fields, its solver's in its place (sweeps in [compile])
+_ENV_TYPES = {name: kind for f in dataclasses.fields(EnvConfig) for name, kind in (
+    [(g.name, g.type) for g in dataclasses.fields(Solver) if g.name != "sweeps"]
+    if f.name == "solver" else [(f.name, f.type)])}
 
 
 def _typed(cls, values, path, key):
