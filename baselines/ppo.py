@@ -1,4 +1,5 @@
-"""PPO baseline of the PNNL PARS study: rejax's PPO on a gymnax adapter of `LoadSheddingEnv`.
+"""PPO baseline of the PNNL PARS study: rejax's PPO on the gymnax face of `LoadSheddingEnv`
+(`jaxgrid.gym.LoadSheddingGymnax`).
 
 The study (Huang et al., "Accelerated deep reinforcement learning based load shedding for
 emergency voltage control", 2022) compares PARS with parallel PPO (RLlib, Table II). Here PPO
@@ -10,7 +11,7 @@ and rejax lacks added by overriding its two update functions:
     (reward units) from the value at collection; rejax clips it with the policy's clip_eps;
   - the KL term of RLlib (`kl_coeff` · mean KL(old ‖ new)) added to the actor loss.
 
-    env, params = gymnax_env(study)                     # the study's training tasks
+    env, params = gymnax_env(study)       # jaxgrid.gym: the study's training tasks
     algo = make_ppo(env, params, PPOConfig())
     state = algo.init_state(jax.random.PRNGKey(0))
     state = algo.train_iteration(state)                 # one rollout + the epochs over it
@@ -58,153 +59,11 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 from flax import traverse_util
-from gymnax.environments import environment, spaces
+from gymnax.environments import environment
 from rejax import PPO as RejaxPPO
 from rejax.networks import GaussianPolicy
 
-from jaxgrid.env import EnvParams, EnvState, LoadSheddingEnv
-from jaxgrid.grid import GridModel
-from jaxgrid.problem import at_point
-from jaxgrid.study import Study
-from jaxgrid.tasks import PointTask
-
-# --------------------------------------------------------------------------- #
-# The gymnax adapter
-# --------------------------------------------------------------------------- #
-
-
-@struct.dataclass
-class GymnaxParams:
-    """Values of the adapter (traced; the grid models are data, not constants).
-
-    Attributes:
-      env: reward and action values.  models: the study's grid models, every array leaf
-        with a leading (n_points,) axis.  tasks: (n_tasks,) the tasks `reset` draws from.
-      max_steps_in_episode: agent steps per episode (static).
-    """
-
-    env: EnvParams
-    models: GridModel
-    tasks: PointTask
-    max_steps_in_episode: int = struct.field(pytree_node=False, default=100)
-
-
-@struct.dataclass
-class GymnaxState:
-    """One episode of the adapter.
-
-    Attributes:
-      inner: the `LoadSheddingEnv` state.  point: () int32 its operating point.
-      time: () int32 agent steps taken (gymnax's field).
-      episode_return: () reward summed so far in this episode.
-      returns_sum, returns_count: () sum and number of the returns of the episodes that
-        ended since the counters were last zeroed (training statistics; `step` keeps them
-        across the automatic reset).
-    """
-
-    inner: EnvState
-    point: jnp.ndarray
-    time: jnp.ndarray
-    episode_return: jnp.ndarray
-    returns_sum: jnp.ndarray
-    returns_count: jnp.ndarray
-
-
-class LoadSheddingGymnax(environment.Environment):
-    """`LoadSheddingEnv` behind the gymnax API, one task per episode.
-
-    `reset_env` draws a task uniformly from `params.tasks` (operating point and fault, as
-    PARS's uniform sampling) and resets; `step_env` steps with the grid model of that task's
-    operating point; gymnax's `step` resets automatically when an episode ends.
-
-    Spaces: observation (history·n_obs,) float32 as `LoadSheddingEnv`; action (n_action,)
-    in [-1, 1] mapped linearly onto [action_low, action_high] (fraction of the initial load
-    shed per step) with `normalize_actions`, else in [action_low, action_high] itself. The
-    bounds are Python floats fixed at construction (rejax's policy keeps them as static
-    attributes), so the adapter's params must carry the same action range.
-    """
-
-    def __init__(self, env: LoadSheddingEnv, action_low: float, action_high: float,
-                 normalize_actions: bool = True):
-        if env.precision != "float32":
-            raise ValueError(f"PPO trains float32 environments; this study is "
-                             f"{env.precision!r} (compile it with precision = 'float32')")
-        self.env = env
-        self.low, self.high = float(action_low), float(action_high)
-        self.normalize_actions = bool(normalize_actions)
-        self.n_action = len(env.action_slots)
-        self.n_obs = env.config.history * env.obs_size
-
-    def env_action(self, action):
-        """The env's action (fraction of the initial load) of a policy action."""
-        if not self.normalize_actions:
-            return action
-        return self.low + (jnp.clip(action, -1.0, 1.0) + 1.0) * (0.5 * (self.high - self.low))
-
-    def draw_task(self, key, params: GymnaxParams) -> PointTask:
-        """One task of `params.tasks`, uniformly."""
-        n_tasks = jax.tree.leaves(params.tasks)[0].shape[0]
-        k = jax.random.randint(key, (), 0, n_tasks)
-        return jax.tree.map(lambda a: a[k], params.tasks)
-
-    def reset_env(self, key, params: GymnaxParams):
-        task = self.draw_task(key, params)
-        grid = at_point(params.models, task.point)
-        obs, inner = self.env.reset(None, task.task, params.env, grid)
-        zero = jnp.zeros((), jnp.float32)
-        state = GymnaxState(inner=inner, point=jnp.asarray(task.point, jnp.int32),
-                            time=jnp.zeros((), jnp.int32), episode_return=zero,
-                            returns_sum=zero, returns_count=jnp.zeros((), jnp.int32))
-        return obs, state
-
-    def step_env(self, key, state: GymnaxState, action, params: GymnaxParams):
-        del key
-        grid = at_point(params.models, state.point)
-        obs, inner, reward, done, info = self.env.step(state.inner, self.env_action(action),
-                                                       params.env, grid)
-        state = state.replace(inner=inner, time=state.time + 1,
-                              episode_return=state.episode_return + reward)
-        return obs, state, reward, done, info
-
-    def step(self, key, state: GymnaxState, action, params: GymnaxParams | None = None):
-        """gymnax's step (automatic reset) keeping the return statistics across the reset."""
-        obs, new, reward, done, info = super().step(key, state, action, params)
-        finished = state.episode_return + reward
-        new = new.replace(returns_sum=state.returns_sum + jnp.where(done, finished, 0.0),
-                          returns_count=state.returns_count + done.astype(jnp.int32))
-        return obs, new, reward, done, info
-
-    def observation_space(self, params: GymnaxParams):
-        bound = self.env.config.bounds.max_voltage
-        return spaces.Box(0.0, bound, (self.n_obs,), jnp.float32)
-
-    def action_space(self, params: GymnaxParams | None = None):
-        low, high = (-1.0, 1.0) if self.normalize_actions else (self.low, self.high)
-        return spaces.Box(low, high, (self.n_action,), jnp.float32)
-
-    @property
-    def name(self) -> str:
-        return "LoadShedding"
-
-    @property
-    def default_params(self):
-        """None: the params hold the study's models and tasks (`gymnax_env` makes them)."""
-        return None
-
-
-def gymnax_env(study: Study, task_set: str = "train", normalize_actions: bool = True,
-               env: LoadSheddingEnv | None = None):
-    """(LoadSheddingGymnax, GymnaxParams) of `study`'s task set (every operating point ×
-    fault), with `env` (default `study.env()`, e.g. `study.env(episode=6.0)`)."""
-    env = env or study.env()
-    params = study.params
-    adapter = LoadSheddingGymnax(env, float(params.action_low), float(params.action_high),
-                                 normalize_actions)
-    values = GymnaxParams(env=params, models=study.models,
-                          tasks=study.batch(study.tasks(task_set)),
-                          max_steps_in_episode=env.config.n_steps)
-    return adapter, values
-
+from jaxgrid.env import LoadSheddingEnv
 
 # --------------------------------------------------------------------------- #
 # PPO with RLlib's value clip and KL term
@@ -319,8 +178,13 @@ class PPO(RejaxPPO):
 
 
 def make_ppo(env: environment.Environment, env_params, config: PPOConfig) -> PPO:
-    """The PPO of `config` on a gymnax `env` (any: the adapter, or gymnax's Pendulum-v1).
-    Observation normalisation on, reward normalisation off."""
+    """The PPO of `config` on a gymnax `env` (any: `jaxgrid.gym.LoadSheddingGymnax`, or
+    gymnax's Pendulum-v1). Observation normalisation on, reward normalisation off.
+    ValueError for a load-shedding environment that is not float32."""
+    inner = getattr(env, "env", None)
+    if isinstance(inner, LoadSheddingEnv) and inner.precision != "float32":
+        raise ValueError(f"PPO trains float32 environments; this study is "
+                         f"{inner.precision!r} (compile it with precision = 'float32')")
     return PPO.create(
         env=env, env_params=env_params, num_envs=config.envs, num_steps=config.rollout_steps,
         num_epochs=config.epochs, num_minibatches=config.minibatches,

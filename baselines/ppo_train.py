@@ -40,7 +40,8 @@ import numpy as np
 
 from ars import checkpoint
 from ars.train import device_label
-from baselines.ppo import PPOConfig, gymnax_env, make_ppo, ppo_policy, save_policy
+from baselines.ppo import PPOConfig, make_ppo, ppo_policy, save_policy
+from jaxgrid.gym import gymnax_env
 from jaxgrid.problem import layout, play_specs
 from jaxgrid.study import Study, write_study
 

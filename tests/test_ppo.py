@@ -17,8 +17,9 @@ import orbax.checkpoint as ocp
 import pytest
 from rejax.algos.ppo import AdvantageMinibatch, Trajectory
 
-from baselines.ppo import PPOConfig, gymnax_env, make_ppo
+from baselines.ppo import PPOConfig, make_ppo
 from experiments import evaluate, train_ppo
+from jaxgrid.gym import gymnax_env
 from jaxgrid.study import builtin
 
 # float32 throughout: values of O(1) to O(1e5) through a dozen operations and a mean over a

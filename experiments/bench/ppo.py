@@ -25,10 +25,11 @@ import itertools
 import jax
 import jax.numpy as jnp
 
-from baselines.ppo import PPOConfig, gymnax_env, make_ppo
+from baselines.ppo import PPOConfig, make_ppo
 from baselines.ppo_train import host_state, make_chunk
 from experiments.bench.timing import timed, write_report
 from experiments.common.studyargs import load_study
+from jaxgrid.gym import gymnax_env
 
 
 def shape_config(text: str) -> PPOConfig:
