@@ -25,8 +25,9 @@ The prediction model (choices, documented where they differ from the plant):
     from the fault's start on it knows the fault, its impedance and its clearing time (set
     by protection).
   * `dt`: the prediction may step coarser than the plant (0: the plant's step). It steps
-    at one fixed step: a plant's coarse step outside the fault window (`EnvConfig.coarse_dt`)
-    is not used, since its per-agent-step choice has no reverse-mode gradient.
+    at one fixed step: a plant's coarse step outside the fault window
+    (`jaxgrid.steppers.Solver.coarse_dt`) is not used, since its per-agent-step choice has
+    no reverse-mode gradient.
 """
 from __future__ import annotations
 
@@ -38,19 +39,22 @@ import numpy as np
 import optax
 from flax import struct
 
+from jaxgrid.checks import Range
 from jaxgrid.env import EnvParams, EnvState, LoadSheddingEnv
 from jaxgrid.episode import ControlInputs
 from jaxgrid.grid import GridModel
 
-# Each option: (allowed low, high, meaning); the one table `parse_options` checks.
+# Each option's allowed values, with its meaning: the one table `parse_options` checks.
 OPTION_RANGES = {
-    "horizon": (0.0, 30.0, "prediction horizon, s (whole agent steps, at least `every`)"),
-    "every": (1, 1000, "agent steps per decision"),
-    "iterations": (1, 10000, "Adam steps per decision"),
-    "learning_rate": (0.0, 1.0, "Adam step, fraction of the initial load"),
-    "width": (0.0, 1.0, "stall/restart surrogate width in voltage, p.u. (0: exact gradient)"),
-    "timer_width": (0.0, 10.0, "stall/restart surrogate width in timer time, s"),
-    "dt": (0.0, 1.0, "prediction step, s (0: the plant's)"),
+    "horizon": Range(0.0, 30.0, "s: the prediction horizon (whole agent steps, at least "
+                     "`every`)", lo_open=True),
+    "every": Range(1, 1000, "agent steps per decision"),
+    "iterations": Range(1, 10000, "Adam steps per decision"),
+    "learning_rate": Range(0.0, 1.0, "Adam step, fraction of the initial load"),
+    "width": Range(0.0, 1.0, "p.u.: the stall/restart surrogate's width in voltage (0: "
+                   "exact gradient)"),
+    "timer_width": Range(0.0, 10.0, "s: the stall/restart surrogate's width in timer time"),
+    "dt": Range(0.0, 1.0, "s: the prediction step (0: the plant's)"),
 }
 
 
@@ -69,11 +73,8 @@ class MpcOptions:
     dt: float = 0.01
 
     def __post_init__(self):
-        for name, (low, high, meaning) in OPTION_RANGES.items():
-            value = getattr(self, name)
-            if not low <= value <= high or (name == "horizon" and value <= 0):
-                raise ValueError(f"MPC option {name} = {value!r} ({meaning}): allowed "
-                                 f"{'(' if name == 'horizon' else '['}{low}, {high}]")
+        for name, allowed in OPTION_RANGES.items():
+            allowed.check(f"MPC option {name}", getattr(self, name))
 
 
 def parse_options(text: str) -> MpcOptions:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from experiments.common.ppo_training import config_from_args, parser, train_study
+from experiments.common.ppo_training import config_from_args, parser, train_ppo_study
 from experiments.common.studyargs import study_from_args
 
 
@@ -40,12 +40,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _train(args) -> int:
-    """`train_study` of the flags' config on the flags' study."""
+    """`train_ppo_study` of the flags' config on the flags' study."""
     config = config_from_args(args)
     saved_study = Path(config.out) / "study.toml"
     study = study_from_args(args, str(saved_study) if config.resume and saved_study.is_file()
                             else None)
-    train_study(study, config)
+    train_ppo_study(study, config)
     return 0
 
 

@@ -10,7 +10,7 @@
   the other value was written.
 - Settings the study would not read (files with a built-in, load levels with RAW files) are
   refused.
-All of these fail before anything compiles. `experiments.common.studyargs.notes_summary` turns the
+All of these fail before anything compiles. `experiments.common.studyargs.warnings_summary` turns the
 warnings of a build into one line per kind.
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ import warnings
 
 import pytest
 
-from experiments.common.studyargs import notes_summary
+from experiments.common.studyargs import warnings_summary
 from jaxgrid.study.pnnl import read_task_config
 from jaxgrid.io.raw import RawWarning
 from jaxgrid.study import StudyWarning, builtin, from_files, read_study
@@ -162,7 +162,7 @@ def test_notes_of_a_build_are_one_line_per_kind():
     caught += [_warning(StudyWarning, "study 'x': 13 note(s) in Study.notes (3 on t.json, 10 "
                                       "on s.json)"),
                _warning(UserWarning, "a " * 100), _warning(UserWarning, "b")]
-    lines = notes_summary(caught)
+    lines = warnings_summary(caught)
     assert lines[0].startswith("16 note(s) while building the study") and "--verbose" in lines[0]
     assert lines[1:3] == [
         "  RawWarning x13 (13 files): records not modelled, skipped: transformer tap control x5",
@@ -170,7 +170,7 @@ def test_notes_of_a_build_are_one_line_per_kind():
     assert lines[3].startswith("  UserWarning x2: a a ") and lines[3].endswith(
         "a... [+1 other message(s)]") and len(lines[3]) == 120
     assert len(lines) == 4
-    assert notes_summary([]) == []
+    assert warnings_summary([]) == []
 
 
 def test_a_task_json_as_evaluation_tasks_names_its_repeats(shared_cases, tmp_path):

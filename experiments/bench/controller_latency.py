@@ -15,7 +15,7 @@ from ars.policies import Policy, PolicySpec
 from baselines.controllers import load
 from baselines.mpc import mpc_controller, parse_options
 from baselines.uvls import uvls_policy
-from experiments.common.studyargs import load_study
+from experiments.common.studyargs import study_from_spec
 from experiments.common.training import paper_preset
 from jaxgrid.episode import ControlInputs
 from jaxgrid.problem import GridProblem
@@ -83,7 +83,7 @@ def bench_study(name: str, batch: int, calls: int, mpc: str | None, mpc_batch: i
     """Latency rows of the study `name`'s controllers: random-θ PARS policies, or the
     trained `policies` {label: folder}, then UVLS and the MPC with options `mpc` (None: no
     MPC row)."""
-    study = load_study(name)
+    study = study_from_spec(name)
     rows = []
     pars = _saved_controllers(study, policies) if policies else _controllers(study)
     uvls_env = study.env()

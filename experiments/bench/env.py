@@ -17,14 +17,14 @@ import jax
 
 from baselines.controllers import no_control
 from experiments.bench.timing import sharded_timings, write_report
-from experiments.common.studyargs import load_study
+from experiments.common.studyargs import study_from_spec
 from jaxgrid.episode import play_tasks
 
 
 def bench_case(name: str, batch_sizes, device_counts, repeats: int) -> dict:
     """Rollouts of the study's training tasks at its first operating point (name: a built-in
     study or a study file)."""
-    study = load_study(name)
+    study = study_from_spec(name)
     env, grid = study.env(), study.point(0)
     specs = [s for s in study.tasks("train") if s.operating_point == 0]
     apply, params, carry = no_control(env)

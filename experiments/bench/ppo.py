@@ -28,7 +28,7 @@ import jax.numpy as jnp
 from baselines.ppo import PPOConfig, make_ppo
 from baselines.ppo_train import host_state, make_chunk
 from experiments.bench.timing import timed, write_report
-from experiments.common.studyargs import load_study
+from experiments.common.studyargs import study_from_spec
 from jaxgrid.gym import gymnax_env
 
 
@@ -84,7 +84,7 @@ def main(argv=None) -> None:
                         help="environment steps to project the run time of")
     parser.add_argument("--out", default="benchmarks/cpu/ppo.json")
     args = parser.parse_args(argv)
-    study = load_study(args.study)
+    study = study_from_spec(args.study)
     rows = []
     for config, seeds in itertools.product(args.shapes, args.seeds):
         rows.append(bench_shape(study, config, seeds, args.iterations, args.repeats,

@@ -28,12 +28,12 @@ import jax.numpy as jnp
 
 from experiments.bench.profiling import profile_model
 from experiments.bench.timing import write_report
-from experiments.common.studyargs import load_study
+from experiments.common.studyargs import study_from_spec
 
 
 def profile(name: str, batch: int, calls: int) -> dict:
     """`profile_model` of a study's first operating point on its training tasks."""
-    study = load_study(name)
+    study = study_from_spec(name)
     specs = [s for s in study.tasks("train") if s.operating_point == 0]
     tasks = study.batch([specs[k % len(specs)] for k in range(batch)]).task
     result = {"study": name, **profile_model(study.point(0), study.config.solver.fine(), tasks,

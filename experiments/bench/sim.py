@@ -31,7 +31,7 @@ import numpy as np
 from experiments.reference.andes_files import run_andes, write_psse_dyr
 from experiments.bench.inputs import SHARED
 from experiments.bench.timing import sharded_timings, write_report
-from experiments.common.studyargs import load_study
+from experiments.common.studyargs import study_from_spec
 from jaxgrid import network
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import read_dyr
@@ -73,7 +73,7 @@ def step_compile_seconds(model, solver: Solver) -> float:
 def load_case(name: str):
     """(model, solver, (raw, dyr) files for ANDES or None) of a benchmark case."""
     if name in STUDY_CASES:
-        study = load_study(name)
+        study = study_from_spec(name)
         return study.point(0), study.config.solver.fine(), None
     raw_fn, dyr_fn, drop = CASES[name]
     folder = tempfile.mkdtemp()

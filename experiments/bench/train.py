@@ -29,7 +29,7 @@ from jax.sharding import Mesh
 from ars.pars import init_state
 from ars.train import make_trainer
 from experiments.bench.timing import timed, write_report
-from experiments.common.studyargs import load_study
+from experiments.common.studyargs import study_from_spec
 from experiments.common.training import COMMANDS, Choices, problem, train_config
 
 BUILT_IN = [c["study"] for c in COMMANDS.values() if c["study"]]
@@ -42,7 +42,7 @@ def bench_case(case: str, device_counts, repeats: int, task_batch: int | None = 
     """Time a `case` iteration for every direction count N in `directions` (None: the
     training command's; b = N/2), every --compact-after setting in `compact_settings` and
     every device count."""
-    study = load_study(case)
+    study = study_from_spec(case)
     result = {"case": case, "tasks_per_iteration": TASKS_PER_ITERATION, "runs": []}
     for n_dir, setting in itertools.product(directions, compact_settings):
         choices = Choices(directions=n_dir, tasks_per_iteration=TASKS_PER_ITERATION,

@@ -13,7 +13,7 @@ import jax
 from ars.policies import KINDS
 from experiments.common.studyargs import add_study_arguments, study_from_args
 from experiments.common.training import (COMMANDS, PAPER_PRESETS, TASKS_PER_ITERATION, Choices,
-                                         shaping, train_study, widths)
+                                         shaping, train_pars_study, widths)
 
 SMALL, LARGE = PAPER_PRESETS["small"], PAPER_PRESETS["large"]
 
@@ -98,7 +98,7 @@ def parser(command: str) -> argparse.ArgumentParser:
 
 
 def run(argv: list[str] | None, command: str) -> int:
-    """Training command `command` with the flags `argv`: `train_study` of their `Choices`
+    """Training command `command` with the flags `argv`: `train_pars_study` of their `Choices`
     on their study (a resumed run's own study.toml without --study); 2 and the error on
     stderr for bad input."""
     args = parser(command).parse_args(argv)
@@ -110,7 +110,7 @@ def run(argv: list[str] | None, command: str) -> int:
                                 else None)
         names = {f.name for f in dataclasses.fields(Choices)}
         chosen = {k: v for k, v in vars(args).items() if k in names}
-        train_study(study, Choices(**{**chosen, "shaping": shaping(args.shaping)}))
+        train_pars_study(study, Choices(**{**chosen, "shaping": shaping(args.shaping)}))
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

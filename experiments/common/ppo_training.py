@@ -72,7 +72,7 @@ def config_from_args(args):
                           resume=args.resume)
 
 
-def train_study(study, config):
+def train_ppo_study(study, config):
     """`baselines.ppo_train.train_ppo` of `config` (a `PPOTrainConfig`) on `study`, then
     learning_curve.png and a summary line; returns `train_ppo`'s PPOTrainResult."""
     from baselines.ppo_train import train_ppo

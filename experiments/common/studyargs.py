@@ -62,7 +62,7 @@ def study_from_args(args: argparse.Namespace, fallback: str | None = None) -> St
     return study
 
 
-def load_study(spec: str) -> Study:
+def study_from_spec(spec: str) -> Study:
     """`jaxgrid.study.load_study(spec)` (a built-in name or a study file) for a command: the
     notes of building it summarised on stderr (`summarised_notes`)."""
     with summarised_notes():
@@ -72,7 +72,7 @@ def load_study(spec: str) -> Study:
 @contextlib.contextmanager
 def summarised_notes(verbose: bool = False):
     """Warnings raised inside printed on stderr at the end: one line per kind (category)
-    with its count and its most frequent message, shortened (`notes_summary`); verbose:
+    with its count and its most frequent message, shortened (`warnings_summary`); verbose:
     every one in full."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -80,12 +80,12 @@ def summarised_notes(verbose: bool = False):
             yield
         finally:
             lines = ([f"{w.category.__name__}: {w.message}" for w in caught] if verbose
-                     else notes_summary(caught))
+                     else warnings_summary(caught))
             if lines:
                 print("\n".join(lines), file=sys.stderr, flush=True)
 
 
-def notes_summary(caught: list[warnings.WarningMessage]) -> list[str]:
+def warnings_summary(caught: list[warnings.WarningMessage]) -> list[str]:
     """A header and one line per warning category: "  RawWarning x13 (13 files): records
     not modelled, skipped: ..."; the same message of different files counts as one."""
     if not caught:

@@ -3,7 +3,7 @@ choices)` turns a study and what a user chose (`Choices`, one field per flag of
 `experiments.train`; None or "auto": the paper's setting for the study's grid size) into the
 `ars.train.TrainConfig`, and `problem(study, choices)` into the study's side
 (`jaxgrid.problem.training_problem`). The training commands, the reproduction harness and
-the training benchmarks all use them; `train_study` runs one training.
+the training benchmarks all use them; `train_pars_study` runs one training.
 """
 from __future__ import annotations
 
@@ -201,7 +201,7 @@ def tasks_per_iteration(study, choices: Choices) -> int:
     return m
 
 
-def train_study(study, choices: Choices = Choices()):
+def train_pars_study(study, choices: Choices = Choices()):
     """`ars.train.train` of `train_config(study, choices)` on `problem(study, choices)`, then,
     on process 0, learning_curve.png and a summary line; returns `train`'s TrainResult."""
     from ars.train import train

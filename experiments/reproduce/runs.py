@@ -4,8 +4,8 @@ A run's folder (or file) under OUT/runs/ is named by what it is and a hash of ev
 depends on: the study (its TOML text) and the run's settings. A finished run is reused; a
 training run that was interrupted resumes from its last checkpoint; a changed input gives a
 new name, so nothing stale is ever read back. PARS and PPO trainings are library calls
-(`experiments.common.training.train_study` and `experiments.common.ppo_training
-.train_study`), named by their `ars.train.TrainConfig` and
+(`experiments.common.training.train_pars_study` and `experiments.common.ppo_training
+.train_ppo_study`), named by their `ars.train.TrainConfig` and
 `baselines.ppo_train.PPOTrainConfig`.
 """
 from __future__ import annotations
@@ -26,10 +26,10 @@ import numpy as np
 from ars.pars import init_state
 from ars.train import make_trainer
 from experiments.reproduce.claims import best_ppo_seed
-from experiments.common.studyargs import load_study
+from experiments.common.studyargs import study_from_spec
 from experiments.common.curves import SMOOTHING, smoothed
 from experiments.common.training import (Choices, paper_preset, problem, train_config,
-                                         train_study)
+                                         train_pars_study)
 from jaxgrid.problem import play_specs
 from jaxgrid.study import Study, write_study
 
@@ -123,7 +123,7 @@ class Runs:
     def __init__(self, study_spec: str, out: str | Path, settings: Settings):
         self.out = Path(out)
         self.settings = settings
-        self.study = _sized(load_study(study_spec), settings)
+        self.study = _sized(study_from_spec(study_spec), settings)
         self.out.mkdir(parents=True, exist_ok=True)
         self.study_file = self.out / "study.toml"
         write_study(self.study, self.study_file)
@@ -185,8 +185,9 @@ class Runs:
             folder / "policy").is_dir()
 
     def pars(self, policy: str, directions: int) -> Path:
-        """A finished PARS training (`pars_choices`, `experiments.common.training.train_study`); its
-        folder. An interrupted one resumes from its last checkpoint."""
+        """A finished PARS training (`pars_choices`,
+        `experiments.common.training.train_pars_study`); its folder. An interrupted one
+        resumes from its last checkpoint."""
         return self.trained(self.pars_folder(policy, directions),
                             self.pars_choices(policy, directions))
 
@@ -198,7 +199,8 @@ class Runs:
         if rows and rows[-1]["iteration"] >= choices.iterations and (folder / "policy").is_dir():
             return folder
         resume = any((folder / "checkpoints").glob("[0-9]*"))
-        train_study(self.study, dataclasses.replace(choices, out=str(folder), resume=resume))
+        train_pars_study(self.study, dataclasses.replace(choices, out=str(folder),
+                                                         resume=resume))
         return folder
 
     def training_time(self) -> tuple[float, list[str]]:
@@ -263,11 +265,11 @@ class Runs:
 
     # --- PPO -------------------------------------------------------------------------------
     def ppo(self, seed: int, env_steps: int) -> Path:
-        """A finished PPO training (`experiments.train_ppo.train_study`, the study's Table II
+        """A finished PPO training (`experiments.common.ppo_training.train_ppo_study`, the study's Table II
         defaults with `settings.ppo_flags`) of `env_steps` environment steps; its folder,
         named by its `baselines.ppo_train.PPOTrainConfig`. An interrupted one resumes."""
         from experiments.common.ppo_training import config_from_args, parser
-        from experiments.common.ppo_training import train_study as train_ppo_study
+        from experiments.common.ppo_training import train_ppo_study
 
         flagged = config_from_args(parser().parse_args(list(self.settings.ppo_flags)))
         config = dataclasses.replace(flagged, env_steps=env_steps,

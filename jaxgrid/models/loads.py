@@ -16,6 +16,10 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
+from jaxgrid.checks import Range
+
+FRACTION = Range(0.0, 1.0, "of the bus's load")  # LoadSplit's p_z ... q_p
+PQ_BREAK = Range(0.0, 1.0, "p.u.", lo_open=True)  # LoadSplit.pq_break
 
 @dataclasses.dataclass(frozen=True)
 class LoadSplit:
@@ -36,16 +40,15 @@ class LoadSplit:
     pq_break: float = 0.7
 
     def __post_init__(self):
+        """InputError naming the field of a value outside its range; ValueError for
+        fractions that do not sum to 1."""
         for name in ("p_z", "p_i", "p_p", "q_z", "q_i", "q_p"):
-            value = getattr(self, name)
-            if not 0.0 <= value <= 1.0:
-                raise ValueError(f"LoadSplit.{name} = {value!r}: allowed range is [0, 1]")
+            FRACTION.check(name, getattr(self, name))
         for axis in ("p", "q"):
             total = sum(getattr(self, f"{axis}_{k}") for k in "zip")
             if abs(total - 1.0) > 1e-9:
                 raise ValueError(f"LoadSplit: {axis}_z + {axis}_i + {axis}_p = {total:g}, must be 1")
-        if not 0.0 < self.pq_break <= 1.0:
-            raise ValueError(f"LoadSplit.pq_break = {self.pq_break!r}: allowed range is (0, 1]")
+        PQ_BREAK.check("pq_break", self.pq_break)
 
     @property
     def has_injections(self) -> bool:
