@@ -12,11 +12,15 @@ evaluated with each value either unbatched or batched along a trailing axis of s
 primitive has a rule keeping the batch last (elementwise ops broadcast their unbatched
 operands, gathers and scatters take the batch as one more window dimension, loops carry it).
 The primitives handled are declared in one table, `RULES`, checked at import against the
-installed JAX: on a JAX release not in `KNOWN_JAX`, or one lacking a primitive of the table,
-the interpreter is refused with a `BatchingWarning` naming both, and `vmap_minor` is plain
-`jax.vmap` (correct, slower on CPU). A primitive without a rule falls back to `jax.vmap`
-of that primitive alone, moving the batch to the front and back (correct, only slower;
-`fallbacks` lists them for a given call).
+installed JAX: on a JAX release not in `KNOWN_JAX` (the releases of pyproject.toml's jax
+range, which the tests run on), or one lacking a primitive of the table, the interpreter is
+refused with a `BatchingWarning` naming both, and `vmap_minor` is plain `jax.vmap` (correct:
+the simulator, the environment and the PARS iteration give `jax.vmap`'s results, tested in
+tests/test_batching.py by refusing the table on this JAX; slower on CPU, by the factors
+docs/performance.md measures, "The fast path refused"). `refuse` does the same on a known
+JAX, to measure it (`experiments.bench.train --plain-vmap`). A primitive without a rule
+falls back to `jax.vmap` of that primitive alone, moving the batch to the front and back
+(correct, only slower; `fallbacks` lists them for a given call).
 
 Per-example matrices are the exception: XLA's batched product wants their batch first. A
 function wrapped in `batch_major` (the policy) is a `jax.jit` whose body starts by passing its
@@ -36,9 +40,10 @@ fuse in a different order; tested).
 
 On a GPU the layout question differs: XLA:GPU assigns layouts itself and emits transposes as
 tiled kernels, and its step is launch-bound (docs/performance.md), so the CPU's transposed
-fusions may cost nothing there. Dropping `vmap_minor` for plain `jax.vmap` on a GPU would
-take: timing the PARS iteration (`experiments.bench.train`, 39- and 300-bus at the studies'
-N) with both on one GPU and JAX release (the GPU figures on record predate this module);
+fusions may cost nothing there (the GPU figures on record ran with the table refused, on
+JAX 0.11.2). Dropping `vmap_minor` for plain `jax.vmap` on a GPU would take: timing the PARS
+iteration (`experiments.bench.train`, 39- and 300-bus at the studies' N, with and without
+`--plain-vmap`) on one GPU and a JAX release of `KNOWN_JAX`;
 if `jax.vmap` is as fast, choosing by backend in this module alone (`jax.default_backend()`
 not "cpu": `vmap_minor` returns `jax.vmap(fun, in_axes, out_axes)`, `first` is ignored and
 `batch_major` is a plain `jax.jit`, since `jax.vmap` keeps every batch first); and keeping the
@@ -61,7 +66,8 @@ from jax.extend.core import primitives
 from jax.interpreters import ad, mlir
 from jax.interpreters import batching as jax_batching
 
-KNOWN_JAX = ((0, 10),)  # JAX releases (major, minor) `RULES` was checked against (the tests)
+KNOWN_JAX = ((0, 10),)  # JAX releases (major, minor) `RULES` was checked against (the tests;
+# pyproject.toml's jax range: 0.10 is the newest release the project's package index serves)
 
 FIRST = "first"  # the flag of a value kept batch-first (`vmap_minor`'s `first`)
 
@@ -603,3 +609,11 @@ _RULE_OF, REFUSED = _rules_of_this_jax(RULES)  # REFUSED: why vmap_minor is jax.
 if REFUSED:
     warnings.warn(f"jaxgrid.batching: {REFUSED}; vmap_minor runs as jax.vmap (correct, "
                   "slower on CPU)", BatchingWarning, stacklevel=2)
+
+
+def refuse(reason: str) -> None:
+    """From now on `vmap_minor` runs as `jax.vmap` (`batch_major` calls as they are), as on
+    a JAX outside `KNOWN_JAX`: what that costs is measured with it (`experiments.bench.train
+    --plain-vmap`). Functions already traced keep their batching."""
+    global REFUSED
+    REFUSED = reason

@@ -235,3 +235,42 @@ def test_a_refused_table_runs_as_jax_vmap(monkeypatch):
     monkeypatch.setattr(batching, "batch_last", None)  # the interpreter is not entered
     assert_trees_close(vmap_minor(program, in_axes=(0, None, 0))(X, W, np.arange(7) % 4),
                        jax.vmap(program, in_axes=(0, None, 0))(X, W, np.arange(7) % 4))
+
+
+def test_a_refused_table_runs_the_pars_iteration_as_before(monkeypatch):
+    """The path a JAX outside `KNOWN_JAX` takes (pyproject.toml's range), through what a grid
+    training batches with it: the PARS iteration of `jaxgrid.population` (vectors sharded
+    over the devices, a `batch_major` policy network, loop episodes of different lengths,
+    regrouped after a step) with the table refused runs as `jax.vmap` and ends at the fast
+    path's θ to float32 rounding (the two layouts fuse sums in another order; 3 iterations of
+    θ = O(1)), simulating the same steps."""
+    from ars.iteration import default_mesh, make_iteration
+    from ars.normalizer import initial_carry, normalized_policy
+    from ars.pars import Pars, ParsConfig, init_state
+    from ars.policies import Policy, PolicySpec
+    from jaxgrid.population import evaluator
+    from tests.test_ars import TARGETS, ShortfallEpisode
+
+    policy = Policy(PolicySpec("lstm", 2, 2, (4,), -0.2, 0.0))
+    config = ParsConfig(directions=4, top=2, step_size=0.2, noise=0.3, tasks_per_iteration=2,
+                        compact_after=1, compact_chunks=3, seed=3)
+
+    def train():
+        mesh = default_mesh()
+        evaluate = evaluator(ShortfallEpisode(), normalized_policy(policy, batch_major),
+                             initial_carry(policy), mesh, config.task_batch,
+                             config.compact_after, config.compact_chunks)
+        iteration = make_iteration(Pars(config), evaluate, config.tasks_per_iteration,
+                                   mesh=mesh)
+        state, steps = init_state(policy, config), []
+        for _ in range(3):
+            state, metrics = iteration(state, TARGETS, 1.0)
+            steps.append(int(metrics["env_steps"]))
+        return np.asarray(state.theta), steps
+
+    fast, fast_steps = train()
+    monkeypatch.setattr(batching, "REFUSED", "a JAX this table does not know")
+    monkeypatch.setattr(batching, "batch_last", None)  # the interpreter is not entered
+    plain, plain_steps = train()
+    np.testing.assert_allclose(plain, fast, rtol=1e-5, atol=1e-6)
+    assert plain_steps == fast_steps

@@ -2,7 +2,7 @@
 device count.
 
     python -m experiments.bench.train [--studies ieee39_fidvr ieee300_fidvr FILE.toml]
-        [--devices 1 2] [--directions N ...] [--task-batch M] [--repeats 2]
+        [--devices 1 2] [--directions N ...] [--task-batch M] [--repeats 2] [--plain-vmap]
         [--out benchmarks/cpu/train.json]
 
 Each built-in study runs with the defaults of its training command (LSTM; 39-bus N = 16,
@@ -14,7 +14,8 @@ the first `d` CPU devices (or of GPUs, where the backend has them). `--direction
 the batch: N directions make 2·N·m rollouts per iteration (b = N/2). The first call
 (compile + run) and the best of `--repeats` later calls are timed. `--compact-after` sweeps
 the episodes' regrouping (`experiments.train --compact-after`; 'auto' as the training
-command).
+command). `--plain-vmap` batches with `jax.vmap` (`jaxgrid.batching.refuse`), as a JAX
+release outside `jaxgrid.batching.KNOWN_JAX` does: what the batch-last path is worth.
 """
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ from ars.train import make_trainer
 from experiments.bench.timing import timed, write_report
 from experiments.common.studyargs import study_from_spec
 from experiments.common.training import COMMANDS, Choices, problem, train_config
+from jaxgrid import batching
 
 BUILT_IN = [c["study"] for c in COMMANDS.values() if c["study"]]
 TASKS_PER_ITERATION = 9
@@ -95,11 +97,15 @@ def main(argv=None) -> None:
                              "training command's)")
     parser.add_argument("--compact-after", nargs="*", default=["auto"],
                         help="--compact-after settings of experiments.train to sweep")
+    parser.add_argument("--plain-vmap", action="store_true",
+                        help="batch with jax.vmap, as a JAX outside the tested range does")
     parser.add_argument("--out", default="benchmarks/cpu/train.json")
     args = parser.parse_args(argv)
     if max(args.devices) > len(jax.devices()):
         parser.error(f"--devices {max(args.devices)}: only {len(jax.devices())} available")
-    write_report(args.out, episode_s=EPISODE,
+    if args.plain_vmap:
+        batching.refuse("--plain-vmap")
+    write_report(args.out, episode_s=EPISODE, vmap="plain" if args.plain_vmap else "minor",
                  cases=[bench_case(c, args.devices, args.repeats, args.task_batch,
                                    args.directions, args.compact_after)
                         for c in args.studies])
