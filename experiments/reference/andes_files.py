@@ -17,6 +17,8 @@ import time
 
 import numpy as np
 
+from experiments.reference.errors import at_times, deviation
+
 
 @dataclasses.dataclass(frozen=True)
 class AndesRun:
@@ -99,25 +101,20 @@ class Errors:
 
 
 def trajectory_errors(model, traj, ref: AndesRun, event_times, settle: float = 0.03) -> Errors:
-    """Compare a single-rollout `Trajectory` of `model` with `ref` at the trajectory's times.
-
-    ANDES's machines are matched to ours by bus, the k-th at a bus to the k-th here.
-    """
+    """A single-rollout `Trajectory` of `model` against `ref` by the harnesses' one measure
+    (`experiments.reference.errors`): ANDES's run at the trajectory's times, every sample
+    outside `settle` s after each event. ANDES's machines are matched to ours by bus, the
+    k-th at a bus to the k-th here; angles are compared relative to the first machine."""
     t = np.asarray(traj.t)
     keep = np.all([(t < e - 1e-9) | (t >= e + settle) for e in event_times], axis=0)
-
-    def at_our_times(a):
-        return np.stack([np.interp(t, ref.t, a[:, k]) for k in range(a.shape[1])], axis=1)
-
     buses = [model.bus_numbers.index(b) for b in ref.bus_ids]
-    v_err = np.abs(np.asarray(traj.vm)[:, buses] - at_our_times(ref.vm))[keep]
+    v_max, v_rms = deviation(np.asarray(traj.vm)[:, buses], at_times(t, ref.t, ref.vm), keep)
     machines: list[int] = []
     for b in ref.gen_bus:
         machines.append(next(k for k, gb in enumerate(model.gen_bus)
                              if gb == b and k not in machines))
-    speed_err = np.abs(np.asarray(traj.speed_dev)[:, machines] - at_our_times(ref.speed_dev))
-    ours, theirs = np.asarray(traj.angle)[:, machines], at_our_times(ref.angle)
-    rel = (ours - ours[:, :1]) - (theirs - theirs[:, :1])
-    return Errors(v_max=float(v_err.max()), v_rms=float(np.sqrt(np.mean(v_err ** 2))),
-                  speed=float(speed_err[keep].max()),
-                  angle_deg=float(np.degrees(np.abs(rel[keep]).max())))
+    speed, _ = deviation(np.asarray(traj.speed_dev)[:, machines],
+                         at_times(t, ref.t, ref.speed_dev), keep)
+    ours, theirs = np.asarray(traj.angle)[:, machines], at_times(t, ref.t, ref.angle)
+    angle, _ = deviation(ours - ours[:, :1], theirs - theirs[:, :1], keep)
+    return Errors(v_max=v_max, v_rms=v_rms, speed=speed, angle_deg=float(np.degrees(angle)))

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.reference.errors import at_times, deviation
 from experiments.reference.gridpack_files import FAULT_X, Fault, Run, Setup, edited_dyr
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.grid import GridModel
@@ -99,16 +100,17 @@ def _trip_start(t, theta, status, th1t) -> float | None:
 def compare(ref: Run, ours: Run, fault: Fault, th1t: dict[int, float]) -> dict:
     """Per bus {rms, max_abs (p.u., after clearing), below_0.9/0.8 (s, ref and ours)}; per
     motor bus the RMS of its P and Q after clearing (p.u. motor base) and the stall,
-    restart and thermal-trip times (s) in both; ours is interpolated onto ref's samples."""
+    restart and thermal-trip times (s) in both; the harnesses' one measure
+    (`experiments.reference.errors`): ours at ref's samples."""
     after = ref.t >= fault.end - 1e-9
     buses = {}
     for b in ref.bus_ids:
         if b not in ours.bus_ids:
             continue
         v_ref = ref.voltage(int(b))
-        v_ours = np.interp(ref.t, ours.t, ours.voltage(int(b)))
-        diff = (v_ours - v_ref)[after]
-        row = {"rms": float(np.sqrt(np.mean(diff ** 2))), "max_abs": float(np.max(np.abs(diff)))}
+        v_ours = at_times(ref.t, ours.t, ours.voltage(int(b)))
+        max_abs, rms = deviation(v_ours, v_ref, after)
+        row = {"rms": rms, "max_abs": max_abs}
         for level in LEVELS:
             row[f"below_{level}"] = [time_below(ref.t, v_ref, level, fault.end),
                                      time_below(ref.t, v_ours, level, fault.end)]
@@ -121,9 +123,9 @@ def compare(ref: Run, ours: Run, fault: Fault, th1t: dict[int, float]) -> dict:
         sides = [(ref, m), (ours, n)]
         power = {}
         for axis in ("p", "q"):
-            ref_s = getattr(ref, f"{axis}_motor")[:, m]
-            ours_s = np.interp(ref.t, ours.t, getattr(ours, f"{axis}_motor")[:, n])
-            power[f"{axis}_rms"] = float(np.sqrt(np.nanmean((ours_s - ref_s)[after] ** 2)))
+            ours_s = at_times(ref.t, ours.t, getattr(ours, f"{axis}_motor")[:, n])
+            _, power[f"{axis}_rms"] = deviation(ours_s, getattr(ref, f"{axis}_motor")[:, m],
+                                                after)
         motors[int(b)] = {
             **power,
             "stall": [_events(r.t, r.status_a[:, k], True)[:1] for r, k in sides],
