@@ -233,33 +233,53 @@ def floor_steps(v_load, v_first: np.ndarray, scales: np.ndarray,
     return hi
 
 
-def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: float,
-               options: CompositeOptions, motors: MotorOptions,
-               labels: Sequence[str]) -> Initialised:
-    """Initialise n composite loads from the system side (spec §6).
+class _Substation(NamedTuple):
+    """The substation transformer of n units at its initial tap (spec §6 step 1), arrays (n,):
+    sbl (load MVA base), x_xf, tap, ratio (low side per system side), v_low, i_low (complex
+    low-side voltage and current), b_ss (shunt), p.u. system base."""
 
-    p: CON arrays (n,); s (n,): the load record's complex power at the solved voltage vs (n,)
-    complex, p.u. system base. Returns the units and their internal bus voltages.
-    """
-    p = {k: np.asarray(v, dtype=float) for k, v in p.items()}
-    notes: list[str] = []
-    n = s.shape[0]
+    sbl: np.ndarray
+    x_xf: np.ndarray
+    tap: np.ndarray
+    ratio: np.ndarray
+    v_low: np.ndarray
+    i_low: np.ndarray
+    b_ss: np.ndarray
+
+
+def _substation(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float) -> _Substation:
     sbl = load_base(p, s.real, sbase)
-    share = fractions(p)
     x_xf = p["xxf"] / sbl * p["tfixhs"] ** 2
     tap = initial_tap(p, s, np.abs(vs), x_xf)
     ratio = p["tfixls"] * tap / p["tfixhs"]
     i_s = np.conj(s / vs)
-    v_low = ratio * (vs - 1j * x_xf * i_s)
-    i_low = i_s / ratio
-    b_ss = p["bss"] * sbl
-    omega_b = np.full(n, 2 * np.pi * f_nom)
-    consts = {m: _motor_constants(p, m, omega_b, motors.stiff_below) for m in MOTORS}
+    return _Substation(sbl, x_xf, tap, ratio, v_low=ratio * (vs - 1j * x_xf * i_s),
+                       i_low=i_s / ratio, b_ss=p["bss"] * sbl)
+
+
+class _Feeder(NamedTuple):
+    """The feeder of n units as initialised (spec §6 steps 2-6), arrays (n,): bf (its
+    compensation), scale (of its impedance, the voltage floor's), v_l and s_l (complex
+    load-bus voltage and power), p.u. system base."""
+
+    bf: np.ndarray
+    scale: np.ndarray
+    v_l: np.ndarray
+    s_l: np.ndarray
+
+
+def _feeder(p: dict, s: np.ndarray, sub: _Substation, share: dict, consts: dict, sbase: float,
+            f_nom: float, options: CompositeOptions, motors: MotorOptions,
+            labels: Sequence[str], notes: list[str]) -> _Feeder:
+    """The feeder's compensation Bf (a secant root find of the load bus's reactive balance,
+    none with compensation "static_q") and the impedance scale that lifts |V_L| to the
+    voltage floor; what the floor changed is appended to `notes`."""
+    n = s.shape[0]
 
     def feeder(bf, scale):
-        z_f = scale * (p["rfdr"] + 1j * p["xfdr"]) / sbl
-        i_f = i_low - 1j * (b_ss + p["fb"] * bf) * v_low
-        v_l = v_low - z_f * i_f
+        z_f = scale * (p["rfdr"] + 1j * p["xfdr"]) / sub.sbl
+        i_f = sub.i_low - 1j * (sub.b_ss + p["fb"] * bf) * sub.v_low
+        v_l = sub.v_low - z_f * i_f
         return v_l, v_l * np.conj(i_f) + 1j * (1.0 - p["fb"]) * bf * np.abs(v_l) ** 2
 
     def mismatch(bf, scale):
@@ -295,7 +315,6 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
     if (scale < 1.0).any():  # else the first solve stands
         bf = solve_bf(scale)
     v_l, s_l = feeder(bf, scale)
-    p_l = s_l.real
     for k in np.flatnonzero(scale < 1.0):
         notes.append(f"{labels[k]}: |V_L| = {v_first[k]:.4f} p.u. < {options.v_floor:g}: "
                      f"feeder impedance scaled to {scale[k]:.2f} × (RFDR + jXFDR), |V_L| = "
@@ -303,17 +322,58 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
     for k in np.flatnonzero(np.abs(v_l) < options.v_floor):
         notes.append(f"{labels[k]}: |V_L| = {abs(v_l[k]):.4f} p.u. stays below the floor "
                      f"{options.v_floor:g}")
+    return _Feeder(bf, scale, v_l, s_l)
 
+
+def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: float,
+               options: CompositeOptions, motors: MotorOptions,
+               labels: Sequence[str]) -> Initialised:
+    """Initialise n composite loads from the system side (spec §6): the substation
+    (`_substation`), the feeder (`_feeder`), then every component at the load bus.
+
+    p: CON arrays (n,); s (n,): the load record's complex power at the solved voltage vs (n,)
+    complex, p.u. system base. Returns the units and their internal bus voltages.
+    """
+    p = {k: np.asarray(v, dtype=float) for k, v in p.items()}
+    notes: list[str] = []
+    n = s.shape[0]
+    sub = _substation(p, s, vs, sbase)
+    share = fractions(p)
+    omega_b = np.full(n, 2 * np.pi * f_nom)
+    consts = {m: _motor_constants(p, m, omega_b, motors.stiff_below) for m in MOTORS}
+    fdr = _feeder(p, s, sub, share, consts, sbase, f_nom, options, motors, labels, notes)
+    v_l, p_l, bf = fdr.v_l, fdr.s_l.real, fdr.bf
     vmag = np.abs(v_l)
     comp, d, slips = _components(p, share, consts, vmag, p_l, sbase, f_nom, motors, labels)
     pd, zd, s_d = d.params, d.flags, d.output["s0"]
     notes.extend(d.report)
     if options.compensation == "static_q":  # the static load's Q closes the balance
-        comp["st"] = comp["st"] + 1j * (s_l.imag - sum(comp.values()).imag)
-    params, states = dict(p), {}
+        comp["st"] = comp["st"] + 1j * (fdr.s_l.imag - sum(comp.values()).imag)
     b_le = (1.0 - p["fb"]) * bf
     y_norton = pd["y_norton"] + np.conj(comp["el"] + comp["st"]) / vmag ** 2 + 1j * b_le
     drawn = s_d + comp["el"] + comp["st"] - 1j * b_le * vmag ** 2
+    params, states, y_norton, drawn = _motors_abc(p, consts, share, slips, p_l, v_l, vmag,
+                                                  y_norton, drawn)
+    params.update({f"d_{k}": v for k, v in pd.items()})
+    params.update(
+        sbl=sub.sbl, tap=sub.tap, ratio=sub.ratio, x_xf=sub.x_xf,
+        r_fdr=fdr.scale * p["rfdr"] / sub.sbl, x_fdr=fdr.scale * p["xfdr"] / sub.sbl, bf=bf,
+        b_low=sub.b_ss + p["fb"] * bf, b_le=b_le, p_l=p_l, v_l0=vmag,
+        p_el0=share["el"] * p_l, tan_el=_tan(p["pfel"]), p_st0=comp["st"].real,
+        q_st0=comp["st"].imag, extra_var=np.full(n, float(options.extra_var == "load_end")),
+        w_a=share["a"], w_b=share["b"], w_c=share["c"], w_d=share["d"], w_el=share["el"],
+        w_st=comp["st"].real / p_l, y_norton=y_norton)
+    notes.extend(_unit_notes(p, sub, fdr, share, comp, s_d, consts, sbase, motors, labels))
+    return Initialised(params=params, states=states, flags=_initial_flags(zd, n), s0=drawn,
+                       v_low=sub.v_low, v_load=v_l, notes=notes)
+
+
+def _motors_abc(p: dict, consts: dict, share: dict, slips: dict, p_l, v_l, vmag, y_norton,
+                drawn):
+    """(params, states, y_norton, drawn): the CONs `p` with motors A-C's constants and
+    torques added (prefixed "ma_" ...), their states at their slips, and each one's Norton
+    admittance and drawn power added to `y_norton` and `drawn` (n,), p.u. system base."""
+    params, states = dict(p), {}
     for m in MOTORS:
         c = consts[m]
         sm = share[m] * p_l / p[f"lfm{m}"]
@@ -327,33 +387,39 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
                        f"m{m}_psii": psik0.imag, f"m{m}_w": 1.0 - slips[m]})
         y_norton = y_norton + sm / (c["ra"] + 1j * c["lpp"])
         drawn = drawn + sm * v_l * np.conj(i0)
-    params.update({f"d_{k}": v for k, v in pd.items()})
-    params.update(
-        sbl=sbl, tap=tap, ratio=ratio, x_xf=x_xf, r_fdr=scale * p["rfdr"] / sbl,
-        x_fdr=scale * p["xfdr"] / sbl, bf=bf, b_low=b_ss + p["fb"] * bf, b_le=b_le, p_l=p_l,
-        v_l0=vmag, p_el0=share["el"] * p_l, tan_el=_tan(p["pfel"]), p_st0=comp["st"].real,
-        q_st0=comp["st"].imag, extra_var=np.full(n, float(options.extra_var == "load_end")),
-        w_a=share["a"], w_b=share["b"], w_c=share["c"], w_d=share["d"], w_el=share["el"],
-        w_st=comp["st"].real / p_l, y_norton=y_norton)
+    return params, states, y_norton, drawn
+
+
+def _initial_flags(zd: dict, n: int) -> dict:
+    """The units' flags at rest: motor D's (prefixed "d_"), no voltage dip seen, every motor
+    A-C part running with its trip timers at zero."""
     flags = {f"d_{k}": v for k, v in zd.items()}
     flags["vmin_e"] = np.full(n, NO_DIP)
     for m in MOTORS:
         for k in "12":
             flags.update({f"on{k}{m}": np.ones(n), f"ttr{k}{m}": np.zeros(n),
                           f"trc{k}{m}": np.zeros(n)})
-    for k in range(n):
+    return flags
+
+
+def _unit_notes(p: dict, sub: _Substation, fdr: _Feeder, share: dict, comp: dict, s_d,
+                consts: dict, sbase: float, motors: MotorOptions,
+                labels: Sequence[str]) -> list[str]:
+    """One line per unit of what it was initialised to, and one where motor D draws other
+    than its share."""
+    notes, p_l, vmag = [], fdr.s_l.real, np.abs(fdr.v_l)
+    for k in range(p_l.shape[0]):
         dropped = [m.upper() for m in MOTORS if consts[m]["double"][k] == 0
                    and p[f"lpp{m}"][k] < p[f"lp{m}"][k] and p[f"tppo{m}"][k] > 0]
         notes.append(
             f"{labels[k]}: P_L = {p_l[k] * sbase:.2f} MW at |V_L| = {vmag[k]:.4f} p.u. "
-            f"(low side {abs(v_low[k]):.4f}), Sb_L = {sbl[k] * sbase:.2f} MVA, tap {tap[k]:.5f}, "
-            f"Bf = {bf[k] / sbl[k]:.4f} p.u. load base, shares A {share['a'][k]:.3f} "
-            f"B {share['b'][k]:.3f} C {share['c'][k]:.3f} D {share['d'][k]:.3f} "
-            f"el {share['el'][k]:.3f} static {share['st'][k]:.3f}"
+            f"(low side {abs(sub.v_low[k]):.4f}), Sb_L = {sub.sbl[k] * sbase:.2f} MVA, tap "
+            f"{sub.tap[k]:.5f}, Bf = {fdr.bf[k] / sub.sbl[k]:.4f} p.u. load base, shares A "
+            f"{share['a'][k]:.3f} B {share['b'][k]:.3f} C {share['c'][k]:.3f} D "
+            f"{share['d'][k]:.3f} el {share['el'][k]:.3f} static {share['st'][k]:.3f}"
             + (f"; subtransient stage of motor(s) {', '.join(dropped)} dropped (Tppo < "
                f"{motors.stiff_below:g} s)" if dropped else ""))
         if abs(comp["st"][k].real - share["st"][k] * p_l[k]) > 1e-9:
             notes.append(f"{labels[k]}: motor D draws {s_d[k].real * sbase:.3f} MW at V_L, not "
                          f"its share; the static load takes the difference")
-    return Initialised(params=params, states=states, flags=flags, s0=drawn, v_low=v_low,
-                       v_load=v_l, notes=notes)
+    return notes
