@@ -55,6 +55,15 @@ def andes_cases_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def ieee39():
+    """The built-in `ieee39_fidvr` study, built once per session (per xdist worker) and shared
+    by the files that read it: a `Study` is immutable (frozen dataclasses, host arrays)."""
+    from jaxgrid.study import builtin
+
+    return builtin("ieee39_fidvr")
+
+
+@pytest.fixture(scope="session")
 def shared_cases() -> Path:
     """../shared/cases, the PNNL reference inputs (read in place, never copied)."""
     assert SHARED_CASES.is_dir(), f"reference cases not found at {SHARED_CASES}"

@@ -74,8 +74,8 @@ def test_recovery_check_by_hand():
 
 
 @pytest.fixture(scope="module")
-def study():
-    return builtin("ieee39_fidvr")
+def study(ieee39):
+    return ieee39
 
 
 @pytest.fixture(scope="module")

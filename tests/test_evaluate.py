@@ -7,12 +7,11 @@ import pytest
 
 from experiments.common.evaluation import evaluate
 from experiments.evaluate import main
-from jaxgrid.study import builtin
 
 
 @pytest.fixture(scope="module")
-def study():
-    return builtin("ieee39_fidvr")
+def study(ieee39):
+    return ieee39
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ import pytest
 
 from baselines.mpc import (MpcOptions, MpcParams, decide, horizon_return, mpc_controller,
                            parse_options, surrogate_model)
-from jaxgrid.study import builtin, rebuild
+from jaxgrid.study import rebuild
 from jaxgrid.tasks import TaskSpec
 
 AGENT_STEPS_TO = 13  # decisions at t = 1.3 s: the fault (1.0 s) is on or cleared
@@ -29,13 +29,13 @@ def state_at(study, env, spec: TaskSpec, steps: int):
 
 
 @pytest.fixture(scope="module")
-def study32():
-    return builtin("ieee39_fidvr")
+def study32(ieee39):
+    return ieee39
 
 
-def test_gradient_matches_central_differences_without_stall():
+def test_gradient_matches_central_differences_without_stall(ieee39):
     with jax.enable_x64(True):
-        study = rebuild(builtin("ieee39_fidvr"), precision="float64")
+        study = rebuild(ieee39, precision="float64")
         env = study.env()
         # a remote fault through 0.05 p.u.: no motor stalls, every switch stays put
         spec = TaskSpec(fault_bus=29, fault_duration=0.08, fault_start=1.0, operating_point=0,

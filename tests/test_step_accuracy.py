@@ -7,12 +7,11 @@ import pytest
 
 from experiments.diagnostics.step_accuracy import (ACCURACY_AT_CHECK, ACCURACY_P99, accuracy,
                                                    accurate)
-from jaxgrid.study import builtin
 
 
 @pytest.fixture(scope="module")
-def report():
-    return accuracy(builtin("ieee39_fidvr"), dts=(0.002, 0.005), sweeps=(1,),
+def report(ieee39):
+    return accuracy(ieee39, dts=(0.002, 0.005), sweeps=(1,),
                     reference_dt=0.001, reference_sweeps=4, episode=6.0, coarse_dts=(0.0, 0.01),
                     stress_rollouts=8)
 

@@ -170,10 +170,10 @@ def test_study_file_round_trip_gives_the_identical_definition(pnnl39, tmp_path):
     assert study.task_set("test").fault_durations == (0.02, 0.05, 0.08, 0.1), "kept"
 
 
-def test_built_in_study_is_the_case_as_before():
+def test_built_in_study_is_the_case_as_before(ieee39):
     from jaxgrid.cases import load
 
-    study, case = builtin("ieee39_fidvr"), load("ieee39_fidvr")
+    study, case = ieee39, load("ieee39_fidvr")
     assert (study.config.observed_buses, study.config.action_buses, study.config.dt) == (
         case.observed_buses, case.action_buses, case.dt)
     assert [len(study.tasks(s)) for s in ("train", "test")] == [9, 120]
@@ -268,7 +268,7 @@ def test_a_study_file_on_a_base_overrides_key_by_key(tmp_path):
         read_study(derived)
 
 
-def test_policy_of_another_layout_is_refused_by_name(tmp_path):
+def test_policy_of_another_layout_is_refused_by_name(tmp_path, ieee39):
     """A saved policy knows its layout; evaluating it on a study with other buses names both."""
     from experiments.common.evaluation import evaluate
 
@@ -283,7 +283,7 @@ def test_policy_of_another_layout_is_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match=r"trained on study 'tiny'\) has the layout "
                                          r"\{'observed_buses': \[4, 504\].*; study "
                                          r"'ieee39_fidvr' has \{'observed_buses': \[4, 504, 7"):
-        evaluate(builtin("ieee39_fidvr"), f"policy:{folder}", "test")
+        evaluate(ieee39, f"policy:{folder}", "test")
 
 
 def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):

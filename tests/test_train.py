@@ -20,7 +20,7 @@ import pytest
 from conftest import REPO
 from experiments.common.evaluation import evaluate
 from experiments.common.pars_command import run
-from jaxgrid.study import builtin, read_study
+from jaxgrid.study import read_study
 
 TINY = ["--policy", "linear", "--history", "1", "--directions", "1", "--top", "1",
         "--tasks-per-iteration", "1", "--episode", "0.5", "--checkpoint-every", "3",
@@ -115,9 +115,10 @@ def test_two_processes_on_loopback_match_one_process(tmp_path, straight):
         np.testing.assert_array_equal(a[name], b[name])
 
 
-def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_path, capsys):
+def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_path, capsys,
+                                                                ieee39):
     study = read_study(straight / "study.toml")
-    assert study.definition == builtin("ieee39_fidvr").definition, "the run's study is saved"
+    assert study.definition == ieee39.definition, "the run's study is saved"
     result = evaluate(study, f"policy:{straight / 'policy'}", "train")
     assert result["summary"]["n_tasks"] == 9
     assert (straight / "learning_curve.png").is_file()
@@ -186,14 +187,14 @@ def test_tasks_per_iteration_fits_the_set_or_names_the_flag():
         tasks_per_iteration(study, args(9))
 
 
-def test_shaping_and_joined_task_sets_change_the_training_only(capsys):
+def test_shaping_and_joined_task_sets_change_the_training_only(capsys, ieee39):
     """--task-set train+test trains on both sets' tasks; --shaping sets reward weights of the
     training episodes while the study (what evaluations and the saved study use) keeps its
     own; bad items name the flag."""
     from experiments.common.training import shaping
     from jaxgrid.problem import training_problem
 
-    study = builtin("ieee39_fidvr")
+    study = ieee39
     weights = shaping(["c_normal=30", "c_shed=200"])
     assert weights == (("c_normal", 30.0), ("c_shed", 200.0))
     problem = training_problem(study, "lstm", task_set="train+test", shaping=dict(weights))

@@ -19,14 +19,13 @@ from baselines.uvls import UvlsParams, check_params, uvls_policy
 from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
 from jaxgrid.episode import play_tasks
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
-from jaxgrid.study import builtin
 
 FRACTION_TOL = 1e-6  # float32 fractions of 0.2 after a subtraction or two
 
 
 @pytest.fixture(scope="module")
-def study():
-    return builtin("ieee39_fidvr")
+def study(ieee39):
+    return ieee39
 
 
 @pytest.fixture(scope="module")
