@@ -18,10 +18,11 @@ from jaxgrid.records import DyrRecord
 from jaxgrid.models.acmotor import NO_DIP, Acmtblu1
 from jaxgrid.models.base import Initial, LoadSite, ModelError, device_label
 from jaxgrid.models.cmld_cons import MOTOR_D_NAMES, MOTORS
-from jaxgrid.models.induction import Cim5bl, solve_slip, steady_state, transient_constants
+from jaxgrid.models.induction import (Cim5bl, motor_constants, motorw_circuit, solve_slip,
+                                      steady_state, transient_constants)
 from jaxgrid.models.options import CompositeOptions, MotorOptions
 
-LL_OVER_LPP = 0.8  # Ll = 0.8·Lpp (WECC note on PSS/E's CMLD, spec §8 question 3)
+LL_OVER_LPP = 0.8  # Ll/Lpp of the circuit realising motors A-C (any Ll < Lpp: the same motor)
 SECANT_STEPS = 60  # iterations of the Bf root find (converges in < 10)
 SECANT_TOL = 1e-13  # p.u. system base: reactive mismatch accepted at the load bus
 
@@ -158,11 +159,20 @@ def fractions(p: dict) -> dict[str, np.ndarray]:
 
 
 def _motor_constants(p: dict, m: str, omega_b, stiff_below: float) -> dict:
-    """Constants of motor m for the Cim5bl functions (p.u. on its base, s)."""
-    lpp = p[f"lpp{m}"]
-    c = transient_constants(p[f"ls{m}"], p[f"lp{m}"], lpp, LL_OVER_LPP * lpp, p[f"tpo{m}"],
-                            p[f"tppo{m}"], (lpp < p[f"lp{m}"]) & (p[f"tppo{m}"] > 0),
-                            stiff_below)
+    """Constants of motor m for the Cim5bl functions (p.u. on its base, s): the WECC motorw
+    form of spec §6 (Ls, Lp, Lpp, Tpo, Tppo), exactly, through its equivalent circuit
+    (`induction.motorw_circuit`, Ll = LL_OVER_LPP·Lpp); a subtransient stage with
+    Tppo < stiff_below (s) is dropped (Lpp := Lp, single cage, the same form)."""
+    ls, lp, lpp, tpo, tppo = (p[f"{k}{m}"] for k in ("ls", "lp", "lpp", "tpo", "tppo"))
+    double = (lpp < lp) & (tppo > 0) & (tppo >= stiff_below)
+    ll = LL_OVER_LPP * lpp
+    with np.errstate(divide="ignore", invalid="ignore"):
+        circuit = motorw_circuit(ls, lp, np.where(double, lpp, 0.5 * lp), tpo,
+                                 np.where(double, tppo, 1.0), np.where(double, ll, 0.4 * lp),
+                                 omega_b)
+    two = motor_constants(circuit, omega_b, stiff_below=0.0)
+    one = transient_constants(ls, lp, lp, ll, tpo, 0.0 * tpo, np.zeros(lp.shape, bool), 0.0)
+    c = {k: np.where(double, two[k], one[k]) for k in one}
     zero = np.zeros_like(lpp)
     return dict(c, ra=p[f"rs{m}"], omega_b=omega_b, sat_a=zero, sat_b=zero, h=p[f"h{m}"],
                 d=p[f"etrq{m}"])
