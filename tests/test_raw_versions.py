@@ -157,6 +157,15 @@ def test_v34_v35_layouts_give_the_v33_tables(version, v33):
     assert case.skipped["system-wide"] == 2 and case.skipped["substation"] == 1
 
 
+def test_v34_without_system_wide_section(v33):
+    """Some writers leave the v34 system-wide data out: the bus records follow the titles."""
+    text = network(34).replace("GENERAL, THRSHZ=0.0001, PQBRAK=0.7, BLOWUP=5.0\n", "").replace(
+        'RATING, 1, "RATE1 ", "RATING SET 1"\n', "").replace("0 / END OF SYSTEM-WIDE DATA\n", "")
+    case = quiet_parse(text, "nosys.raw")
+    assert_same_tables(case, v33)
+    assert "nosys.raw:6: no system-wide data section: the bus data begin here" in case.notes
+
+
 def test_no_rev_read_by_its_bus_records(v33, tmp_path):
     """A v33 file whose first line has no REV and whose title lines are blank (as
     dsa/case_ACTIVSg2000_1.raw): the bus records' layout says v33 (noted); a v23 file

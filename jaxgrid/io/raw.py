@@ -32,6 +32,8 @@ Reading real files as they are written (each assumption is a note in `Case.notes
   section's closing `0` line: the sections not given are empty (noted). A file
   that ends before the transformer data, or inside a multi-line record, is
   truncated (CaseError).
+- a v34/v35 file whose bus records follow the title lines has no system-wide
+  data section (noted).
 
 Modelled: buses, loads (constant power/current/admittance parts), fixed and bus
 shunts, switched shunts (fixed at BINIT), generators, branches with line
@@ -272,15 +274,19 @@ class _RawParser:
         self.star_count = 0
         self.transformer_lines: dict[tuple, int] = {}  # (buses, ckt) -> first line
 
+    def _next_data_line(self) -> int | None:
+        """0-based index of the next line that is neither blank nor an `@!` heading."""
+        lines = self.cursor.lines
+        return next((k for k in range(self.cursor.pos, len(lines))
+                     if lines[k].strip() and not lines[k].lstrip().startswith("@!")), None)
+
     def _inferred_version(self) -> int:
         """The version of a file without REV, from its first data record (`infer_version`):
         23 (PSS/E's reading of a missing REV) silently, another with a note."""
-        lines = self.cursor.lines
-        first = next((k for k in range(self.cursor.pos, len(lines))
-                      if lines[k].strip() and not lines[k].lstrip().startswith("@!")), None)
+        first = self._next_data_line()
         if first is None:
             return 23
-        version = infer_version(lines[first])
+        version = infer_version(self.cursor.lines[first])
         if version is None:
             raise CaseError("case identification has no REV and the first data record "
                             f"(line {first + 1}) is no v23, v30 or v33 bus record: the RAW "
@@ -296,6 +302,8 @@ class _RawParser:
         sections = _SECTIONS[self.layout]
         required = sections.index(_REQUIRED[self.layout])
         for k, section in enumerate(sections):
+            if section == "system-wide" and self._bus_data_first():
+                continue
             ended, n_records = self._section(section)
             if ended is None:
                 continue
@@ -312,6 +320,16 @@ class _RawParser:
                     f"{self.source}:{len(self.cursor.lines)}: the file ends {where}; the "
                     f"sections from there on ({', '.join(sections[k:])}) hold no more records")
             return
+
+    def _bus_data_first(self) -> bool:
+        """Whether a v34+ file goes from its title lines straight to bus records (no
+        system-wide data section, as some writers leave it out), noted."""
+        first = self._next_data_line()
+        if first is None or infer_version(self.cursor.lines[first]) is None:
+            return False
+        self.notes.append(f"{self.source}:{first + 1}: no system-wide data section: the bus "
+                          "data begin here")
+        return True
 
     def _record_start(self, section: str) -> tuple[int, list[str]] | str | None:
         """Next record's first line, None at the section's closing `0` line, `_END_OF_DATA`
