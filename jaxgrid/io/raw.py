@@ -234,18 +234,17 @@ def _is_number(text: str) -> bool:
 
 def infer_version(text: str) -> int | None:
     """The RAW version the first data record after the title lines implies, for a file without
-    REV: 23 when the bus record's second field is its type IDE (NAME is 10th), 30 when it is a
-    NAME in an 11-field record (v30 has GL, BL), 33 when it is a NAME otherwise (v31-v33: 9
-    fields, v33: 13). None when the record is no bus record of these layouts (a v34/v35
-    system-wide data record, a `0` line, a keyword)."""
+    REV: 30 when its second field is a NAME (quoted, or not a number) in an 11-field record
+    (v30 has GL, BL), 33 for a NAME otherwise (v31-v33: 9 fields, v33: 13), else 23 (the
+    second field is the type IDE; NAME is 10th). None when the line is no bus record (a
+    v34/v35 system-wide data record, a `0` line)."""
     fields = split_fields(text)
     if len(fields) < 2 or not _is_number(fields[0]) or fields[0].strip() == "0":
         return None
     quoted = _quoted_field(text)
-    named = quoted == 1 or (quoted is None and not _is_number(fields[1]))
-    if not named:
-        return 23 if quoted in (None, 9) and len(fields) >= 9 else None
-    return 30 if len(fields) == 11 else 33
+    if quoted == 1 or (quoted is None and not _is_number(fields[1])):  # a NAME second
+        return 30 if len(fields) == 11 else 33
+    return 23
 
 
 class _RawParser:
