@@ -18,21 +18,29 @@ class RunningStats:
     Attributes:
       count: () number of observations.  mean: (n_obs,).  m2: (n_obs,) sum of squared
       deviations from the mean.
+      floor: the smallest standard deviation a varying feature is scaled by, in the
+        observation's units (None: none, as the paper's Algorithm 1). A feature that hardly
+        moves in training (a bus far from the training faults) would otherwise be scaled up
+        by 1/std and drive the policy far outside its trained range on a fault near it.
     """
 
     count: jnp.ndarray
     mean: jnp.ndarray
     m2: jnp.ndarray
+    floor: float | None = struct.field(pytree_node=False, default=None)
 
     @classmethod
-    def empty(cls, n_obs: int) -> RunningStats:
-        return cls(jnp.zeros(()), jnp.zeros(n_obs), jnp.zeros(n_obs))
+    def empty(cls, n_obs: int, floor: float | None = None) -> RunningStats:
+        return cls(jnp.zeros(()), jnp.zeros(n_obs), jnp.zeros(n_obs), floor)
 
     @property
     def std(self):
-        """(n_obs,) standard deviation, 1 where (nearly) constant or nothing seen yet."""
+        """(n_obs,) standard deviation (at least `floor`), 1 where (nearly) constant or
+        nothing seen yet."""
         var = self.m2 / jnp.maximum(self.count, 1.0)
         std = jnp.sqrt(var)
+        if self.floor is not None:
+            std = jnp.where(std > STD_FLOOR, jnp.maximum(std, self.floor), std)
         return jnp.where(std > STD_FLOOR, std, 1.0)
 
 
@@ -49,6 +57,6 @@ def merge(stats: RunningStats, count, total, total_sq) -> RunningStats:
     n = stats.count + count
     delta = batch_mean - stats.mean
     share = count / jnp.maximum(n, 1.0)
-    return RunningStats(count=n, mean=stats.mean + delta * share,
-                        m2=stats.m2 + batch_m2 + delta ** 2 * stats.count * share)
+    return stats.replace(count=n, mean=stats.mean + delta * share,
+                         m2=stats.m2 + batch_m2 + delta ** 2 * stats.count * share)
 

@@ -60,6 +60,8 @@ class ParsConfig:
         `resume`, `done` and `result` (`jaxgrid.rollouts.PointEpisode`). Results are equal
         to float rounding, as for `task_batch`.
       compact_chunks: see `compact_after`.
+      obs_std_floor: the normaliser's smallest standard deviation of a varying input, in the
+        input's units (`ars.normalizer.RunningStats.floor`; None: none, as the paper).
       seed: PRNG seed.
     """
 
@@ -72,6 +74,7 @@ class ParsConfig:
     task_batch: int | None = None
     compact_after: int | None = None
     compact_chunks: int = 4
+    obs_std_floor: float | None = None
     seed: int = 0
 
     def __post_init__(self):
@@ -88,6 +91,8 @@ class ParsConfig:
             "compact_after": (self.compact_after is None or self.compact_after >= 1,
                               "None or >= 1"),
             "compact_chunks": (self.compact_chunks >= 1, ">= 1"),
+            "obs_std_floor": (self.obs_std_floor is None or self.obs_std_floor > 0,
+                              "None or > 0"),
         }
         for name, (ok, allowed) in checks.items():
             if not ok:
@@ -147,7 +152,8 @@ def init_state(policy: Policy, config: ParsConfig, seeds: int | None = None) -> 
 
 def _init(policy: Policy, config: ParsConfig, key) -> TrainState:
     return TrainState(theta=policy.initial_theta(),
-                      stats=RunningStats.empty(policy.spec.obs_size), key=key,
+                      stats=RunningStats.empty(policy.spec.obs_size, config.obs_std_floor),
+                      key=key,
                       iteration=jnp.zeros((), jnp.int32),
                       step_size=jnp.asarray(config.step_size, jnp.float32),
                       noise=jnp.asarray(config.noise, jnp.float32))

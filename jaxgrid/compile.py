@@ -133,6 +133,7 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     pf = solve(case) if pf is None else pf
     notes: list[str] = []
     records = _classify(dyr, case, options.strict, notes)
+    notes.extend(_sentinel_notes(records))
     keys, load_keys = _unit_keys(case)
     machines = _machine_groups(case, records["machine"], keys, options.strict, notes)
     order = np.array([u for g in machines for u in g.units], dtype=int)
@@ -295,6 +296,15 @@ def _classify(dyr: DyrData, case: Case, strict: bool, notes: list[str]) -> dict[
         warnings.warn(message, ModelWarning, stacklevel=3)
         notes.append(message)
     return {kind: _without_repeats(rs, kind, notes) for kind, rs in out.items()}
+
+
+def _sentinel_notes(records: dict[str, list[DyrRecord]]) -> list[str]:
+    """The build notes of CON values read as WECC/PSS/E sentinels (`Con.sentinel_meaning`),
+    model by model."""
+    every = [r for rs in records.values() for r in rs]
+    models = {**MACHINES, **EXCITERS, **GOVERNORS, **LOAD_MODELS, **COMPOSITE_LOADS}
+    return [note for name, model in models.items()
+            for note in model.sentinel_notes([r for r in every if r.model == name])]
 
 
 def _without_repeats(records: list[DyrRecord], kind: str, notes: list[str]) -> list[DyrRecord]:

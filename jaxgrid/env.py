@@ -16,10 +16,13 @@ remaining load fraction at the action buses, optionally the last k of them stack
 per agent step, or one every `obs_interval` seconds within it.
 The reward per step is
 
-    c1·Σ_i ΔV_i − c2·Σ_j ΔP_j − c3·n_invalid − c_pre·n_prefault,
+    c1·Σ_i ΔV_i − c2·Σ_j ΔP_j − c3·n_invalid − c_normal·n_normal − c_pre·n_prefault,
 
 ΔV_i = min(V_i − V_env(t), 0) against the recovery envelope (`jaxgrid.recovery`), ΔP_j the
-load shed this step in p.u. of the system base; an episode that still has a voltage of the
+load shed this step in p.u. of the system base, n_normal the requests at action buses in normal
+operation (`jaxgrid.recovery.normal_operation`, the paper's second kind of invalid action);
+with `action_mask = "hadrec"` such requests (and every request of the first 0.15 s after
+clearing) are dropped before they shed anything, for every controller alike; an episode that still has a voltage of the
 recovery-check set below the recovery level after the recovery time (or diverges) earns −M
 and ends (`terminated`); reaching the episode length ends it too (`truncated`). Each term
 is a named function below. `EnvConfig` is structure (static), `EnvParams` values (traced),
@@ -41,9 +44,9 @@ from jaxgrid.case import VOLTAGE
 from jaxgrid.checks import InputError, Range, check_int, check_listed
 from jaxgrid.dynamics import motor_jacobian
 from jaxgrid.grid import GridModel, GridState
-from jaxgrid.recovery import envelope
+from jaxgrid.recovery import envelope, mask_allows, normal_operation
 from jaxgrid.simulate import (DT, Bounds, Health, Task, advance, checked, clip_closed,
-                              initial_health, integrate, observe, shed)
+                              bus_voltage_sets, initial_health, integrate, shed)
 
 
 @struct.dataclass
@@ -54,6 +57,10 @@ class EnvParams:
       c_voltage: c1, weight of the envelope deviation (p.u. of voltage).
       c_shed: c2, weight of the load shed per step (p.u. of the system base).
       c_invalid: c3, penalty per shedding request at an empty action bus.
+      c_normal: penalty per shedding request at an action bus in normal operation (after
+        clearing, its voltage at or above 0.8/0.9/0.95 p.u.: `jaxgrid.recovery`); 0 leaves
+        the term out (RLGC's environment); the PNNL studies set it to c3, as the paper's
+        invalid action is also one "when the system is within normal operation".
       c_prefault: penalty per shedding request before the fault.
       unstable_penalty: M, the reward of the step that fails recovery or diverges.
       recovery_level: p.u. voltage the recovery-check set must reach ...
@@ -64,6 +71,7 @@ class EnvParams:
     c_voltage: float = 260.0
     c_shed: float = 150.0
     c_invalid: float = 3.0
+    c_normal: float = 0.0
     c_prefault: float = 100.0
     unstable_penalty: float = 1000.0
     recovery_level: float = 0.95
@@ -78,6 +86,7 @@ PARAM_RANGES = {
     "c_voltage": Range(0.0, 1e9, "per p.u. of voltage deviation"),
     "c_shed": Range(0.0, 1e9, "per p.u. of load shed"),
     "c_invalid": Range(0.0, 1e9, "per request"),
+    "c_normal": Range(0.0, 1e9, "per request"),
     "c_prefault": Range(0.0, 1e9, "per request"),
     "unstable_penalty": Range(0.0, 1e12, "(the reward -M of a failed episode)"),
     "recovery_level": VOLTAGE,
@@ -105,6 +114,7 @@ ACTION_DEADBAND = Range(0.0, 1.0, "of the initial load per step")
 FINE_WINDOW = Range(0.0, 3600.0, "s after clearing")
 SWEEPS = Range(1, 100, "network sweeps")
 MOTOR_STEPS = ("exponential", "rosenbrock")  # EnvConfig.motor_step
+ACTION_MASKS = ("none", "hadrec")  # EnvConfig.action_mask
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,6 +147,11 @@ class EnvConfig:
       action_deadband: a request to shed at most this fraction of a bus's initial load is
         dropped: not applied and not penalised (HADREC's GridPACK environment: 0.01). 0:
         every request counts.
+      action_mask: "none" (every request is applied: the paper's Java environment, RLGC) or
+        "hadrec" (its authors' GridPACK environment: a request at an action bus in normal
+        operation, or in the first 0.15 s after clearing, is dropped: `jaxgrid.recovery.
+        mask_allows` on the bus voltage at the request). [choice]; default "none", the paper's.
+        The mask is the environment's, so it binds every controller alike.
       recovery_buses: the observed buses the recovery check covers (None: all of them).
       bounds: divergence bounds of the simulation.
     """
@@ -154,6 +169,7 @@ class EnvConfig:
     obs_interval: float | None = None
     include_action_status: bool = True
     action_deadband: float = 0.0
+    action_mask: str = "none"
     recovery_buses: tuple[int, ...] | None = None
     bounds: Bounds = Bounds()
 
@@ -184,6 +200,8 @@ class EnvConfig:
                 _check_whole(span, length, "simulation steps", name, dt)
         check_int("history", self.history, HISTORY)
         ACTION_DEADBAND.check("action_deadband", self.action_deadband)
+        if self.action_mask not in ACTION_MASKS:
+            raise InputError("action_mask", self.action_mask, f"must be one of {ACTION_MASKS}")
         if EPISODE.check("episode", self.episode) < self.agent_dt:
             raise InputError("episode", self.episode, f"must be >= agent_dt = {self.agent_dt} s",
                              related=("agent_dt",))
@@ -247,6 +265,8 @@ class EnvState:
       history: (history, n_obs) the last observations, newest last.
       recovery_check: (n_observed,) bool buses that must recover (at or above the recovery
         level before the fault).
+      action_vm: (n_action,) p.u. voltage at the action buses at the newest observation (what
+        the normal-operation test of the next request reads).
       done: () bool.
     """
 
@@ -256,6 +276,7 @@ class EnvState:
     step: jnp.ndarray
     history: jnp.ndarray
     recovery_check: jnp.ndarray
+    action_vm: jnp.ndarray
     done: jnp.ndarray
 
 
@@ -280,6 +301,12 @@ def shed_power(amount, p0):
 def invalid_requests(request, left_before):
     """Number of action buses asked to shed (request > 0) with nothing left there."""
     return jnp.sum((request > 0) & (left_before <= 0))
+
+
+def normal_requests(request, action_vm, t_after_clearing):
+    """Number of action buses asked to shed while in normal operation (`jaxgrid.recovery`),
+    their voltages action_vm (n,) p.u. at t_after_clearing (s)."""
+    return jnp.sum((request > 0) & normal_operation(action_vm, t_after_clearing, jnp))
 
 
 def prefault_requests(request, t, fault_start):
@@ -310,6 +337,7 @@ class LoadSheddingEnv:
         self.precision = model.precision
         self.observed = np.array([model.bus_index(b) for b in config.observed_buses])
         self.action_slots = np.array([model.load_slot(b) for b in config.action_buses])
+        self.action_buses = np.array([model.bus_index(b) for b in config.action_buses])
         checked = set(config.observed_buses if config.recovery_buses is None
                       else config.recovery_buses)
         self.recovery_mask = np.array([b in checked for b in config.observed_buses])
@@ -334,10 +362,12 @@ class LoadSheddingEnv:
         return len(self.observed) + len(self.action_slots) * self.config.include_action_status
 
     def _observe(self, grid: GridModel, x: GridState, t, task: Task, fault):
-        vm = observe(grid, x, t, self.config.dt, task, fault, self.observed)[0]
+        """(vm (n_observed,), observation (n_obs,), action_vm (n_action,)) at t (s), p.u."""
+        vm, action_vm = (jnp.abs(v) for v in bus_voltage_sets(
+            grid, x, t, self.config.dt, task, fault, self.observed, self.action_buses))
         if not self.config.include_action_status:
-            return vm, vm
-        return vm, jnp.concatenate([vm, x.load_left[self.action_slots]])
+            return vm, vm, action_vm
+        return vm, jnp.concatenate([vm, x.load_left[self.action_slots]]), action_vm
 
     @staticmethod
     def _fault(grid: GridModel, task: Task):
@@ -348,12 +378,13 @@ class LoadSheddingEnv:
         del key
         x = grid.initial
         real = grid.network.real_dtype
-        vm, obs = self._observe(grid, x, jnp.zeros((), real), task, self._fault(grid, task))
+        vm, obs, action_vm = self._observe(grid, x, jnp.zeros((), real), task,
+                                           self._fault(grid, task))
         history = jnp.tile(obs, (self.config.history, 1))
         check = (vm >= params.recovery_level) & self.recovery_mask
         state = EnvState(grid=x, health=initial_health(grid), task=task,
                          step=jnp.zeros((), jnp.int32), history=history,
-                         recovery_check=check, done=jnp.zeros((), bool))
+                         recovery_check=check, action_vm=action_vm, done=jnp.zeros((), bool))
         return history.reshape(-1), state
 
     def _advance(self, grid: GridModel, x: GridState, health: Health, t, task: Task, fault,
@@ -384,15 +415,15 @@ class LoadSheddingEnv:
 
     def _advance_observed(self, grid: GridModel, x: GridState, health: Health, t, task: Task,
                           fault, done):
-        """(grid state, health, vm (n_observed,) at the step's end, observations
-        (samples_per_step, n_obs)) one agent step after x at t (s): `_advance` and an
-        observation at its end, or, with obs_interval, one `_advance` of obs_interval and
-        an observation after each."""
+        """(grid state, health, vm (n_observed,) and action_vm (n_action,) at the step's end,
+        observations (samples_per_step, n_obs)) one agent step after x at t (s): `_advance`
+        and an observation at its end, or, with obs_interval, one `_advance` of obs_interval
+        and an observation after each."""
         cfg = self.config
         if cfg.obs_interval is None:
             x, health = self._advance(grid, x, health, t, task, fault, done)
-            vm, obs = self._observe(grid, x, t + cfg.agent_dt, task, fault)
-            return x, health, vm, obs[None]
+            vm, obs, action_vm = self._observe(grid, x, t + cfg.agent_dt, task, fault)
+            return x, health, vm, action_vm, obs[None]
         interval = self.with_config(agent_dt=cfg.obs_interval, obs_interval=None)
 
         def sample(carry, k):
@@ -402,9 +433,9 @@ class LoadSheddingEnv:
             return (x, health), interval._observe(grid, x, start + cfg.obs_interval, task,
                                                   fault)
 
-        (x, health), (vm, obs) = jax.lax.scan(sample, (x, health),
-                                              jnp.arange(cfg.samples_per_step))
-        return x, health, vm[-1], obs
+        (x, health), (vm, obs, action_vm) = jax.lax.scan(sample, (x, health),
+                                                         jnp.arange(cfg.samples_per_step))
+        return x, health, vm[-1], action_vm[-1], obs
 
     def step(self, state: EnvState, action, params: EnvParams, grid: GridModel):
         """(obs, state, reward, done, info) after one agent step with `action` (n_action,)."""
@@ -415,24 +446,31 @@ class LoadSheddingEnv:
         if cfg.action_deadband > 0:
             request = jnp.where(request > cfg.action_deadband, request, 0.0)
         left = state.grid.load_left[self.action_slots]
+        penalties = (params.c_invalid * invalid_requests(request, left)
+                     + params.c_normal * normal_requests(request, state.action_vm,
+                                                         t - task.fault_end)
+                     + params.c_prefault * prefault_requests(request, t, task.fault_start))
+        if cfg.action_mask == "hadrec":
+            request = jnp.where(mask_allows(state.action_vm, t - task.fault_end, jnp),
+                                request, 0.0)
         amount = jnp.minimum(request, left)
         x = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
         fault = self._fault(grid, task)
-        x, health, vm, observed = self._advance_observed(grid, x, state.health, t, task, fault,
-                                                         state.done)
+        x, health, vm, action_vm, observed = self._advance_observed(grid, x, state.health, t,
+                                                                    task, fault, state.done)
         t_next = t + cfg.agent_dt
         after = t_next - task.fault_end
         failed = recovery_failed(vm, state.recovery_check, after, params) | health.diverged
         shed_pu = shed_power(amount, grid.load_p0[self.action_slots])
         shaped = (params.c_voltage * envelope_deviation(vm, after) - params.c_shed * shed_pu
-                  - params.c_invalid * invalid_requests(request, left)
-                  - params.c_prefault * prefault_requests(request, t, task.fault_start))
+                  - penalties)
         reward = jnp.where(failed, -params.unstable_penalty, shaped)
         truncated = state.step + 1 >= cfg.n_steps
         done = failed | truncated
         history = jnp.concatenate([state.history, observed])[-cfg.history:]
         new = EnvState(grid=x, health=health, task=task, step=state.step + 1,
-                       history=history, recovery_check=state.recovery_check, done=done)
+                       history=history, recovery_check=state.recovery_check,
+                       action_vm=action_vm, done=done)
         info = {"terminated": failed, "truncated": truncated & ~failed,
                 "shed_pu": shed_pu, "shaped_reward": shaped,
                 "diverged": health.diverged}

@@ -199,27 +199,32 @@ class GridProblem:
 
 def training_problem(study: Study, policy_kind: str, history: int | None = None,
                      episode: float | None = None, task_set: str = "train",
-                     sampling: str | None = None) -> GridProblem:
-    """The task set `task_set` of `study` for a `policy_kind` policy: episodes of `episode` s
-    (default the study's), `history` observations stacked (default the study's for the kind),
-    tasks drawn by `sampling` ("uniform" | "stratified", default the study's). The data holds
-    only the set's operating points."""
+                     sampling: str | None = None, shaping: dict | None = None) -> GridProblem:
+    """The task set `task_set` of `study` (or several joined by "+", `Study.tasks`) for a
+    `policy_kind` policy: episodes of `episode` s (default the study's), `history`
+    observations stacked (default the study's for the kind), tasks drawn by `sampling`
+    ("uniform" | "stratified" (one set only), default the study's), rewarded with the study's
+    `EnvParams` but for the fields of `shaping` ({field: value}: reward weights for training
+    only; evaluations keep the study's). The data holds only the set's operating points."""
     history = study.history(policy_kind) if history is None else history
     sampling = sampling or study.definition.training.task_sampling
     overrides = {k: v for k, v in (("history", history), ("episode", episode)) if v is not None}
     env = study.env(**overrides)
-    params = study.params
-    chosen = study.task_set(task_set)
-    points = chosen.points(study.n_points)
+    params = dataclasses.replace(study.params, **(shaping or {}))
+    if sampling == "stratified" and "+" in task_set:
+        raise ValueError(f"--task-set {task_set}: stratified sampling draws from one task set")
+    chosen = study.tasks(task_set)
+    points = sorted({s.operating_point for s in chosen})
     specs = [dataclasses.replace(s, operating_point=points.index(s.operating_point))
-             for s in study.tasks(task_set)]  # indices into the set's points, in order
+             for s in chosen]  # indices into the set's points, in order
     info = {"study": study.name, "points": [p.label for p in study.points],
             "task_set": task_set, "task_sampling": sampling, "layout": layout(env.config),
-            "history": env.config.history, "episode": env.config.episode}
+            "history": env.config.history, "episode": env.config.episode,
+            **({"shaping": dict(shaping)} if shaping else {})}
     return GridProblem(
         study, env, PointEpisode(env, params), study.batch(specs),
         jax.tree.map(lambda a: a[np.array(points)], study.models),
         env.config.history * env.obs_size, len(env.action_slots), float(params.action_low),
         float(params.action_high),
-        (functools.partial(stratified_sampler, chosen, study.n_points)
+        (functools.partial(stratified_sampler, study.task_set(task_set), study.n_points)
          if sampling == "stratified" else None), GRID_VMAPS, info)

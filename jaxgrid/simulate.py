@@ -232,11 +232,20 @@ def observe(model: GridModel, x: GridState, t, dt: float, task: Task, fault: net
     fault's start or clearing sees the new topology from the warm start of the step before,
     which one or two sweeps leave far from converged (this costs one solution per sample).
     """
-    active = fault_active(task, t, dt)
-    _, current, _, _ = solve_network(model, x, fault, active, max(model.sweeps, OBSERVE_SWEEPS))
-    v = network.bus_voltages(model.network, fault, active, current, buses)
+    v = bus_voltage_sets(model, x, t, dt, task, fault, buses)[0]
     return (jnp.abs(v), jnp.angle(v), machine_state(x, "dw"), machine_state(x, "delta"),
             x.load_left, x.load_flags)
+
+
+def bus_voltage_sets(model: GridModel, x: GridState, t, dt: float, task: Task,
+                     fault: network.Fault, *bus_sets):
+    """Complex bus voltages at time t, one array per static index set of `bus_sets` ((k,)
+    bus indices, or None for all buses), from one network solution (as `observe`); each set's
+    rows of the product are computed apart, so adding a set leaves the others' rounding."""
+    active = fault_active(task, t, dt)
+    _, current, _, _ = solve_network(model, x, fault, active, max(model.sweeps, OBSERVE_SWEEPS))
+    return tuple(network.bus_voltages(model.network, fault, active, current, buses)
+                 for buses in bus_sets)
 
 
 @struct.dataclass
@@ -270,7 +279,7 @@ def parameters_valid(model: GridModel):
         for g in getattr(model, family):
             for con in g.model.cons:
                 v = g.params[con.name]
-                ok.append(jnp.all((v >= con.lo) & (v <= con.hi) & ((v > 0) | (not con.positive))))
+                ok.append(jnp.all(con.admits(v)))
     return jnp.all(jnp.stack(ok))
 
 

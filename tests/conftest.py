@@ -45,6 +45,22 @@ def raw_v33(buses: str, loads: str = "", generators: str = "", branches: str = "
     )
 
 
+def stored_mismatch(case):
+    """Per-bus complex power mismatch (n_bus,) of the voltages stored in a RAW file, p.u.:
+    how far the original tool's solution is from satisfying our reading of the data."""
+    import numpy as np
+
+    from jaxgrid.powerflow import admittance_matrix, bus_loads
+
+    v = case.buses.vm * np.exp(1j * case.buses.va)
+    s_power, s_current, s_impedance = bus_loads(case)
+    gen = case.generators
+    s_gen = np.zeros(case.n_bus, complex)
+    np.add.at(s_gen, gen.bus[gen.in_service], (gen.pg + 1j * gen.qg)[gen.in_service])
+    return (v * np.conj(admittance_matrix(case) @ v) - s_gen + s_power
+            + s_current * case.buses.vm + s_impedance * case.buses.vm ** 2)
+
+
 def andes_cases_dir() -> Path:
     """Folder of the PSS/E test files bundled with the andes package (a test dependency)."""
     import importlib.util
@@ -59,3 +75,16 @@ def shared_cases() -> Path:
     """../shared/cases, the PNNL reference inputs (read in place, never copied)."""
     assert SHARED_CASES.is_dir(), f"reference cases not found at {SHARED_CASES}"
     return SHARED_CASES
+
+
+def gridpack_data_sets() -> Path | None:
+    """GridPACK's data sets (`src/applications/data_sets` of its source tree, the tarball
+    ../shared/reference/gridpack/gridpack-src.tar.gz unpacked): under $GRIDPACK_SRC, else
+    $GRIDPACK_HOME/gridpack (default /opt/gridpack/gridpack); None when absent."""
+    roots = [os.environ.get("GRIDPACK_SRC"),
+             str(Path(os.environ.get("GRIDPACK_HOME", "/opt/gridpack")) / "gridpack")]
+    for root in filter(None, roots):
+        folder = Path(root) / "src" / "applications" / "data_sets"
+        if folder.is_dir():
+            return folder
+    return None

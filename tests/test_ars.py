@@ -98,6 +98,19 @@ def test_normaliser_merge_equals_the_pooled_statistics():
     assert float(constant.std[0]) == 1.0, "a constant feature is not scaled up"
 
 
+def test_the_std_floor_bounds_the_scale_of_a_varying_input_only():
+    """floor 0.01: an input of std 0.002 is scaled by 1/0.01, one of std 0.5 by its own, and
+    a constant one by 1, as without a floor; the floor survives merges (a static field)."""
+    x = np.array([[1.0, 0.0, 7.0], [1.004, 1.0, 7.0]])  # stds 0.002, 0.5, 0
+    stats = normalizer.merge(RunningStats.empty(3, floor=0.01), 2, x.sum(0), (x ** 2).sum(0))
+    assert stats.floor == 0.01
+    np.testing.assert_allclose(np.asarray(stats.std), [0.01, 0.5, 1.0], rtol=1e-3)
+    state = init_state(Policy(PolicySpec("linear", 3, 1, ())), ParsConfig(obs_std_floor=0.01))
+    assert state.stats.floor == 0.01
+    with pytest.raises(ValueError, match=r"obs_std_floor = 0.0: allowed None or > 0"):
+        ParsConfig(obs_std_floor=0.0)
+
+
 @pytest.mark.parametrize("kind, hidden", [("linear", ()), ("fnn", (8, 8)), ("lstm", (8, 4))])
 def test_policies_start_at_no_control_and_stay_in_range(kind, hidden):
     policy = Policy(PolicySpec(kind, 3, 2, hidden, -0.2, 0.0))

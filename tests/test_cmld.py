@@ -30,9 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from conftest import raw_v33
+from conftest import gridpack_data_sets, raw_v33
 from jaxgrid import network
-from jaxgrid.compile import CompileOptions, InitWarning, compile_model
+from jaxgrid.compile import CompileOptions, InitWarning, ModelWarning, compile_model
 from jaxgrid.dynamics import derivatives, load_injection, solve_network, update_loads
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import RawWarning, read_raw
@@ -440,6 +440,23 @@ def test_uv_trip_and_reclose_timing(system):
     assert on2a[83] == 1 and on2a[84:].max() == 0 and min(f["on1a"] for f in flags) == 1
 
 
+def test_reclose_sentinel_is_read_noted_and_never_recloses(tmp_path, system):
+    """VRC1B = 999 (GridPACK's composite-load file has 999 and 9999 there): read as written
+    with one build note; the stage-1 trip of motor B then never recloses, even at 1 p.u.
+    (test_uv_trip_and_reclose_timing: it recloses after 0.05 s above 0.75)."""
+    model = build(tmp_path, record(cons_with(vrc1b=999.0, ttr2b=9999.0)))
+    p, z = model.loads[0].params, model.initial.load_flags[0]
+    assert float(p["vrc1b"][0]) == 999.0
+    sentinel = [n for n in model.notes if "WECC/PSS/E sentinel" in n]
+    assert sentinel == [f"{tmp_path / 'one_bus.dyr'}:2: CMLDBLU2 at bus 2 id '1': CON(71) "
+                        "VRC1B = 999 p.u. lies outside [0, 10]: read as the WECC/PSS/E "
+                        "sentinel: motor B's stage-1 trip never recloses"], sentinel
+    # (TTR2B = 9999 s lies in its range: an ordinary time, no note)
+    flags = drive_flags(p, z, np.concatenate([np.full(15, 0.55), np.full(100, 1.0)]))
+    on1 = np.array([f["on1b"] for f in flags])
+    assert on1[8] == 1 and on1[9:].max() == 0
+
+
 def test_end_use_shedding_scales_every_component(system):
     x = system.initial
     flags = dict(x.load_flags[0], vmin_e=np.array([0.6]), on1a=np.array([0.0]),
@@ -498,6 +515,12 @@ def test_feeder_shedding_scales_the_substation_current(tmp_path, system):
     (dict(ltc=1.0), r"one_bus.dyr:2: .*LTC = 1: the under-load tap changer is not implemented"),
     (dict(mtypb=1.0), r"one_bus.dyr:2: .*MTYPB = 1: motors A-C must be three-phase"),
     (dict(vd2=0.8), r"one_bus.dyr:2: .*VD2 = 0.8 >= VD1 = 0.7"),
+    # outside the range and no sentinel (999/9999): still an error
+    (dict(vrc1a=500.0), r"one_bus.dyr:2: .*CON\(51\) VRC1A = 500 p.u.: must lie in "
+                        r"\[0.0, 10.0\]"),
+    # a trip pickup takes no sentinel: "trip below 999 p.u." would always trip
+    (dict(vtr1a=999.0), r"one_bus.dyr:2: .*CON\(48\) VTR1A = 999 p.u.: must lie in "
+                        r"\[0.0, 2.0\]"),
 ])
 def test_bad_data_names_file_line_con_and_value(tmp_path, changes, message):
     raw, dyr = write_system(tmp_path, record(cons_with(**changes)))
@@ -555,6 +578,43 @@ def test_ieee300_composite_loads_start_at_rest(ieee300):
     assert not problems
     loads = [n for n in ieee300.notes if "d/dt" in n or "moves by" in n]
     assert all("IEEET1 at bus 10064" in n for n in loads), loads  # a generator data issue
+
+
+# --------------------------------------------------------------------------- #
+# 6. GridPACK's composite-load case, from its files unchanged
+# --------------------------------------------------------------------------- #
+
+GRIDPACK_CMLD = ("raw/300bus_v23_no0imp_pslf.raw", "dyr/300bus_detail_model_cmpld_combine.dyr")
+FLAT_TOL = 1e-5  # p.u. in 0.5 s: float32 round-off is ~2e-7 here; a device off rest moves more
+
+
+@pytest.mark.skipif(gridpack_data_sets() is None, reason="GridPACK's source tree not found: "
+                    "unpack ../shared/reference/gridpack/gridpack-src.tar.gz, set GRIDPACK_SRC")
+def test_gridpack_composite_load_case_runs_strict():
+    """GridPACK's 300-bus case with 6 CMLDBLU1 (motors A and D), 62 GENSAL + ESST1A + WSIEG1:
+    compiled strict (its reclose voltages of 999 and 9999 read as sentinels, one note each),
+    at rest until a 0.08-s fault at bus 43 at 0.5 s, which runs without divergence and leaves
+    that composite load's bus depressed at 1 s (its motor D stalls)."""
+    from jaxgrid.simulate import FaultEvent, simulate
+
+    data = gridpack_data_sets()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RawWarning)  # transformer adjustment, two-terminal dc
+        case = read_raw(data / GRIDPACK_CMLD[0])
+        warnings.simplefilter("ignore", ModelWarning)  # WSIEG1 limits widened: GridPACK's rule
+        warnings.simplefilter("error", InitWarning)
+        model = compile_model(case, read_dyr(data / GRIDPACK_CMLD[1]))
+    sentinel = [n.split(": ", 2)[2] for n in model.notes if "WECC/PSS/E sentinel" in n]
+    assert [n.split(" = ")[0] for n in sentinel] == [
+        f"CON({j}) {name}" for j, name in ((51, "VRC1A"), (56, "VRC2A"), (71, "VRC1B"),
+                                           (76, "VRC2B"), (91, "VRC1C"), (96, "VRC2C"))]
+    out = simulate(model, 1.0, 0.005, fault=FaultEvent(43, 0.5, 0.08), decimation=10)
+    assert not bool(out.diverged), float(out.diverged_at)
+    vm, t = np.asarray(out.vm), np.asarray(out.t)
+    drift = np.abs(vm[t < 0.5] - np.abs(model.v0)).max()
+    assert drift < FLAT_TOL, f"drifts {drift:.2e} p.u. before the fault"
+    load_bus = model.bus_index(model.bus_number_by_name("Bus43_loadBus"))
+    assert vm[-1, load_bus] < 0.9 < vm[0, load_bus], vm[[0, -1], load_bus]
 
 
 # --------------------------------------------------------------------------- #

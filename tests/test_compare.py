@@ -63,3 +63,71 @@ def test_a_published_policy_is_set_against_its_training_log(tmp_path):
     assert [(t["fault_bus"], t["reward"], t["log_reward"], t["recovered"])
             for t in entry["tasks"]] == [(4, -700.0, -247.5, True), (15, -1200.0, -238.1, False)]
     assert (tmp_path / "figs" / "v5_policy_plus500_log.png").stat().st_size > 10_000
+
+
+def _evaluated(controller, rows):
+    """An evaluate result (`experiments.common.evaluation.evaluate`) of bus: (reward, MW,
+    recovered) rows at one operating point."""
+    return {"controller": controller, "tasks": [
+        {"fault_bus": bus, "fault_duration": 0.1, "fault_start": 1.0, "point": 0,
+         "reward": reward, "shed_mw": mw, "recovered": ok} for bus, (reward, mw, ok) in rows.items()]}
+
+
+def test_scores_per_kind_of_task_by_hand():
+    """Buses 1-2 need no shedding (no control recovers them), 3-5 do. The policy sheds 0.5 MW
+    on bus 1 (nothing: below 1 MW) and 30 MW on bus 2; beats UVLS on 3 and 4, ties on 5."""
+    from experiments.common.scores import scores, targets_met
+
+    none = _evaluated("none", {1: (0, 0, True), 2: (-5, 0, True), 3: (-900, 0, False),
+                               4: (-800, 0, False), 5: (-1000, 0, False)})
+    uvls = _evaluated("uvls", {1: (0, 0, True), 2: (-5, 0, True), 3: (-600, 90, False),
+                               4: (-300, 60, True), 5: (-1000, 0, False)})
+    policy = _evaluated("policy", {1: (-1, 0.5, True), 2: (-50, 30, True),
+                                   3: (-200, 120, True), 4: (-100, 30, True),
+                                   5: (-1000, 0, False)})
+    record = scores(none, uvls, policy)
+    assert record == {"n_tasks": 5, "need": 3, "wins": 2, "recovered": 2, "uvls_recovered": 1,
+                      "mw_need": 50.0, "ok": 2, "sheds_on": 1, "mw_ok": 15.25,
+                      "mean_reward": -270.2}
+    assert targets_met(record) == {"wins": False, "recovers": True, "quiet": False}
+    with pytest.raises(ValueError, match="ran different tasks"):
+        scores(none, uvls, _evaluated("other", {1: (0, 0, True)}))
+
+
+def test_ablation_file_rows_and_table(tmp_path):
+    """An ablation file's rows become training choices (the file's seeds and iterations, the
+    row's flags after them); bad entries name the file and key; the table shows each row's
+    mean and range over seeds and how many seeds meet the targets."""
+    from experiments.ablation import choices, read_spec, table
+
+    study = tmp_path / "study.toml"
+    study.write_text('[grid]\nbuiltin = "ieee39_fidvr"\n')
+    spec_file = tmp_path / "ablation.toml"
+    spec_file.write_text(
+        'out = "out"\nseeds = 2\niterations = 7\ntask_sets = ["test"]\n'
+        '[[rows]]\nname = "paper"\nstudy = "study.toml"\n'
+        '[[rows]]\nname = "shaped"\nstudy = "study.toml"\n'
+        'flags = ["--shaping", "c_normal=30", "--iterations", "9"]\nwhy = "charge"\n')
+    spec = read_spec(spec_file)
+    assert spec.out == tmp_path / "out" and [r.name for r in spec.rows] == ["paper", "shaped"]
+    paper, shaped = (choices(spec, row) for row in spec.rows)
+    assert (paper.seeds, paper.iterations, paper.shaping) == (2, 7, ())
+    assert (shaped.iterations, shaped.shaping) == (9, (("c_normal", 30.0),))
+    record = {"n_tasks": 5, "need": 3, "wins": 3, "recovered": 2, "uvls_recovered": 1,
+              "mw_need": 50.0, "ok": 2, "sheds_on": 0, "mw_ok": 0.0, "mean_reward": -100.0}
+    worse = {**record, "wins": 1, "sheds_on": 1, "mean_reward": -300.0}
+    text = table(spec, {"paper": {"test": {"uvls": record, "seeds": [record, worse]}}})
+    assert "## test: 5 tasks, 3 need shedding (UVLS recovers 1), 2 need none" in text
+    assert "| paper | 66.7 [33.3, 100.0] | 2.0 [2.0, 2.0] (1) |" in text
+    assert "| 1/2 |" in text and "| shaped | not trained |" in text
+    for body, message in (('out = "o"\nseeds = 0\niterations = 1\ntask_sets = ["t"]\n'
+                           'rows = [{name = "a", study = "study.toml"}]\n', r"must be >= 1"),
+                          ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
+                           'rows = [{name = "a", study = "none.toml"}]\n',
+                           r"rows\[0\].study = 'none.toml': no such file"),
+                          ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
+                           'rows = [{name = "a", study = "study.toml"}, '
+                           '{name = "a", study = "study.toml"}]\n', r"a name used twice")):
+        spec_file.write_text(body)
+        with pytest.raises(ValueError, match=message):
+            read_spec(spec_file)

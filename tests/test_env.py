@@ -14,8 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxgrid.env import (EnvParams, envelope_deviation, invalid_requests, prefault_requests,
-                         recovery_failed, shed_power)
+from jaxgrid.env import (EnvParams, envelope_deviation, invalid_requests, normal_requests,
+                         prefault_requests, recovery_failed, shed_power)
+from jaxgrid.recovery import mask_allows, normal_operation
 from jaxgrid.episode import rollout
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 from jaxgrid.study import builtin
@@ -41,6 +42,25 @@ def test_shed_invalid_and_prefault_terms_by_hand():
     assert int(invalid_requests(request, jnp.array([0.0, 0.0, 0.5]))) == 1
     assert int(prefault_requests(request, 0.5, 1.0)) == 2
     assert int(prefault_requests(request, 1.5, 1.0)) == 0
+
+
+@pytest.mark.parametrize("t_after, normal, allowed", [
+    (-0.5, [False, False, False], [False, False, False]),  # before clearing: never normal
+    (0.1, [True, True, False], [False, False, False]),     # 0.8 p.u., but the 0.15-s hold
+    (0.2, [True, True, False], [False, False, True]),      # 0.8 p.u. over (0, 0.33]
+    (0.4, [True, False, False], [False, True, True]),      # 0.9 p.u. over (0.33, 0.5]
+    (0.6, [False, False, False], [True, True, True]),      # 0.95 p.u. after 0.5 s
+])
+def test_normal_operation_and_the_mask_by_hand(t_after, normal, allowed):
+    """HADREC's thresholds (GridPackPowerDynSimEnvDef_v10.py): a bus at 0.93, 0.85, 0.75 p.u.
+    is in normal operation while it is at or above 0.8/0.9/0.95 p.u. (to 0.33/0.5 s/after),
+    and the mask lets it shed when it is not, from 0.15 s after clearing."""
+    vm = np.array([0.93, 0.85, 0.75])
+    assert normal_operation(vm, t_after).tolist() == normal
+    assert np.asarray(normal_operation(jnp.asarray(vm), t_after, jnp)).tolist() == normal
+    assert mask_allows(vm, t_after).tolist() == allowed
+    request = jnp.array([0.2, 0.0, 0.1])
+    assert int(normal_requests(request, jnp.asarray(vm), t_after)) == normal[0] + normal[2]
 
 
 def test_recovery_check_by_hand():
@@ -104,6 +124,41 @@ def test_requests_within_the_action_deadband_are_dropped(study, grid, tasks):
     assert float(info["shed_pu"]) == pytest.approx(0.02 * p0, rel=1e-5)
     assert float(reward) == pytest.approx(-150.0 * 0.02 * p0 - 100.0, rel=1e-5)
     assert np.asarray(state.grid.load_left[env.action_slots]) == pytest.approx([1.0, 0.98, 1.0])
+
+
+def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(study, grid,
+                                                                                tasks):
+    """With action_mask "hadrec" a request at a bus in normal operation is dropped (nothing
+    shed, nothing charged for shedding), one at a low bus is applied, and c_normal charges
+    each request in normal operation whether the mask drops it or not. The agent step at
+    1.3 s is 0.22 s after the bus-4 0.08-s fault clears: the 0.8-p.u. level, past the hold;
+    the bus voltages of the newest observation are set by hand (0.95, 0.7, 0.95 p.u.)."""
+    request = jnp.array([-0.2, -0.2, 0.0])
+    p0 = np.asarray(grid.load_p0)
+    out, steps = {}, {}
+    for mask in ("none", "hadrec"):
+        env = study.env(action_mask=mask)
+        steps[mask] = step = jax.jit(env.step)
+        _, start = env.reset(None, tasks[2], EnvParams(), grid)
+        state = start.replace(step=jnp.asarray(13, jnp.int32),
+                              action_vm=jnp.array([0.95, 0.7, 0.95]))
+        for c_normal in (0.0, 3.0):
+            _, new, reward, _, info = step(state, request, EnvParams(c_normal=c_normal), grid)
+            out[mask, c_normal] = (float(reward), float(info["shed_pu"]),
+                                   np.asarray(new.grid.load_left[env.action_slots]))
+    shed_507 = 0.2 * p0[study.env().action_slots[1]]
+    shed_both = shed_507 + 0.2 * p0[study.env().action_slots[0]]
+    assert out["hadrec", 0.0][1] == pytest.approx(shed_507, rel=1e-6)
+    assert out["hadrec", 0.0][2] == pytest.approx([1.0, 0.8, 1.0])
+    assert out["none", 0.0][1] == pytest.approx(shed_both, rel=1e-6)
+    assert out["none", 0.0][2] == pytest.approx([0.8, 0.8, 1.0])
+    for mask in ("none", "hadrec"):  # one request (at 504) in normal operation: c_normal once
+        assert out[mask, 0.0][0] - out[mask, 3.0][0] == pytest.approx(3.0, abs=1e-3)
+    held = start.replace(step=jnp.asarray(11, jnp.int32), action_vm=jnp.full(3, 0.5))
+    _, new, _, _, info = steps["hadrec"](held, request, EnvParams(c_normal=3.0), grid)
+    # 0.02 s after clearing: held
+    assert float(info["shed_pu"]) == 0.0
+    assert np.asarray(new.action_vm).shape == (3,)
 
 
 def test_observations_every_obs_interval_end_with_the_agent_step_s_own(study, grid, tasks):

@@ -27,7 +27,7 @@ EQUILIBRIUM_TOL = 1e-9
 DISCRETE_TOL = 1e-12
 
 N_CONS = {"IEEET1": 14, "IEEEX1": 16, "EXDC1": 16, "EXDC2": 16, "ESDC1A": 16, "SEXS": 6,
-          "ESST3A": 21, "EXST1": 12}
+          "ESST3A": 21, "EXST1": 12, "ESST1A": 18}
 
 # Typical values; the second unit of each exercises the zero-time-constant bypasses.
 HAND = {
@@ -36,6 +36,12 @@ HAND = {
                (0, 40, 0, 0, 0, 5, -5, 0, 0.9, 0, 0, 0, 0, 0, 0, 0)],
     # TA/TB TB K TE EMIN EMAX
     "SEXS": [(0.1, 10, 100, 0.05, 0, 4), (0.2, 0, 50, 0, -1, 5)],
+    # UEL VOS TR VIMAX VIMIN TC TB TC1 TB1 KA TA VAMAX VAMIN VRMAX VRMIN KC KF TF KLR ILR:
+    # GridPACK's 300-bus units with a second lead-lag, rate feedback and the field-current
+    # limiter acting at t = 0 (XadIfd0 = EFD0 > ILR); then every time constant zero
+    "ESST1A": [(1, 1, 0.02, 0.5, -0.5, 0.51, 2.01, 0.1, 0.05, 178.9, 0.029, 999, -999, 4.48,
+                -1.79, 0.11, 0.02, 1.0, 1.0, 1.2),
+               (3, 2, 0, 999, -999, 0, 0, 0, 0, 100, 0, 999, -999, 5, -4, 0.05, 0, 0, 0, 0)],
 }
 
 
@@ -139,28 +145,35 @@ def test_equilibrium(name, tmp_path):
 # Behaviour
 # --------------------------------------------------------------------------- #
 
-def test_ieeet1_regulator_stops_at_vrmax():
-    # TR 0 KA 50 TA 0.05 VRMAX 5 VRMIN -5 KE 1 TE 0.5 KF 0 TF 0 Switch 0, no saturation:
-    # VR obeys TA dVR/dt = KA·(Vref − Ec) − VR alone. EFD0 = 2 gives VR0 = 2, Vref = 1.04;
-    # Ec 1.0 → 0.9 drives VR toward 50·0.14 = 7: Euler gives VR_n = 7 − 5·(1 − dt/TA)^n
-    # until that passes VRMAX = 5 (n = 46 with dt = 1 ms); then VR = 5 with dVR/dt = 0.
-    model = EXCITERS["IEEET1"]
-    record = hand("IEEET1", (0, 50, 0.05, 5, -5, 1, 0.5, 0, 0, 0, 0, 0, 0, 0))
+def lag_stops_at_limit(model, record, state: str, target: float, limit: float, hit: int):
+    """From rest at EFD0 = 2 (the state at 2), Ec 1.0 → 0.9: explicit Euler (dt = 1 ms) moves
+    `state` as the lag of time constant 0.05 s toward `target`, x_n = target −
+    (target − 2)·(1 − dt/0.05)^n, until that would pass `limit` (after `hit` + 1 steps);
+    then it stays at `limit` with a zero derivative. Returns (p, EFD, trajectory)."""
     dt, n_steps = 1e-3, 200
     with jax.enable_x64(True):
         p, x, inp = start(model, [record], 2.0)
-        assert abs(float(p["vref"][0]) - 1.04) < DISCRETE_TOL, f"Vref = {p['vref']}"
         stepped = inp._replace(ec=inp.ec - 0.1)
-        _, traj = simulate(model, p, x, stepped, dt, n_steps)
-        vr = np.asarray(traj["vr"][:, 0])
-        free = 7.0 - 5.0 * (1.0 - dt / 0.05) ** np.arange(1, n_steps + 1)
-        hit = int(np.argmax(free > 5.0))
-        assert hit == 45, f"VR reaches VRMAX after {hit + 1} steps"
-        np.testing.assert_allclose(vr[:hit], free[:hit], rtol=0, atol=DISCRETE_TOL,
-                                   err_msg="VR before the limit: lag with time constant TA")
-        assert np.all(vr[hit:] == 5.0), f"VR after the limit: {vr[hit:hit + 5]} ..."
+        efd, traj = simulate(model, p, x, stepped, dt, n_steps)
+        values = np.asarray(traj[state][:, 0])
+        free = target - (target - 2.0) * (1.0 - dt / 0.05) ** np.arange(1, n_steps + 1)
+        reached = int(np.argmax(free > limit))
+        assert reached == hit, f"{state} reaches its limit after {reached + 1} steps"
+        np.testing.assert_allclose(values[:hit], free[:hit], rtol=0, atol=DISCRETE_TOL,
+                                   err_msg=f"{state} before the limit: lag toward {target}")
+        assert np.all(values[hit:] == limit), f"{state} after the limit: {values[hit:hit + 5]}"
         _, dx = model.rates(p, {k: v[-1] for k, v in traj.items()}, stepped)
-        assert float(dx["vr"][0]) == 0.0, f"dVR/dt = {dx['vr']} at VRMAX (must be frozen)"
+        assert float(dx[state][0]) == 0.0, f"d{state}/dt = {dx[state]} at the limit (frozen)"
+    return p, np.asarray(efd[:, 0]), values
+
+
+def test_ieeet1_regulator_stops_at_vrmax():
+    # TR 0 KA 50 TA 0.05 VRMAX 5 VRMIN -5 KE 1 TE 0.5 KF 0 TF 0 Switch 0, no saturation:
+    # VR obeys TA dVR/dt = KA·(Vref − Ec) − VR alone. EFD0 = 2 gives VR0 = 2, Vref = 1.04;
+    # Ec 1.0 → 0.9 drives VR toward 50·0.14 = 7 until it passes VRMAX = 5 (n = 46).
+    record = hand("IEEET1", (0, 50, 0.05, 5, -5, 1, 0.5, 0, 0, 0, 0, 0, 0, 0))
+    p, _, _ = lag_stops_at_limit(EXCITERS["IEEET1"], record, "vr", 7.0, 5.0, 45)
+    assert abs(float(p["vref"][0]) - 1.04) < DISCRETE_TOL, f"Vref = {p['vref']}"
 
 
 def test_sexs_steady_state_gain():
@@ -236,6 +249,33 @@ def test_esst3a_input_limit_violation(tmp_path):
     assert found == {"vr": [False, False], "vm_inner": [False, False], "vi": [False, True]}, found
 
 
+def test_esst1a_input_and_va_limits():
+    # TR 0, VIMAX 0.05, KA 100, TA 0.05, VAMAX 4, lead-lags bypassed, KF = KLR = 0: EFD0 = 2
+    # gives VA0 = 2 and Vi0 = 0.02. Ec 1.0 → 0.9 makes the error 0.12, clipped to VIMAX, so VA
+    # heads for KA·VIMAX = 5 (not 12) until it passes VAMAX = 4 (n = 55); EFD = VA, inside the
+    # ceiling Ec·VRMAX = 4.5.
+    record = hand("ESST1A", (1, 1, 0, 0.05, -0.05, 0, 0, 0, 0, 100, 0.05, 4, -4, 5, -5, 0, 0,
+                             0, 0, 0))
+    _, efd, va = lag_stops_at_limit(EXCITERS["ESST1A"], record, "va", 5.0, 4.0, 54)
+    np.testing.assert_allclose(efd[1:], va[:-1], rtol=0, atol=DISCRETE_TOL)
+
+
+def test_esst1a_field_current_limiter_and_ceiling():
+    # KLR 2, ILR 2.5: EFD = clip(VA − 2·max(XadIfd − 2.5, 0), Ec·VRMIN, Ec·VRMAX − KC·XadIfd)
+    # at once (algebraic). At rest EFD0 = 2 with XadIfd 2 (limiter off): VA = 2. XadIfd 3
+    # takes 1.0 off: EFD 1.0; at Ec 0.5 and XadIfd 2 the ceiling 0.5·5 − 0.2·2 = 2.1 holds 2,
+    # at Ec 0.4 it is 1.6; the floor Ec·VRMIN = −2 holds a VA of −3.
+    model = EXCITERS["ESST1A"]
+    record = hand("ESST1A", (2, 1, 0, 9, -9, 0, 0, 0, 0, 100, 0.05, 9, -9, 5, -5, 0.2, 0, 0,
+                             2.0, 2.5))
+    with jax.enable_x64(True):
+        p, x, inp = start(model, [record] * 4, 2.0)
+        x = dict(x, va=jnp.array([2.0, 2.0, 2.0, -3.0]))
+        efd, _ = model.rates(p, x, inputs([1.0, 0.5, 0.4, 0.4], [3.0, 2.0, 2.0, 2.0]))
+    np.testing.assert_allclose(np.asarray(efd), [1.0, 2.0, 1.6, -2.0], rtol=0,
+                               atol=DISCRETE_TOL, err_msg="ESST1A limiter and output limits")
+
+
 def test_exst1_output_ceiling():
     # EFD = clip(VR, Ec·VRMIN, Ec·VRMAX − KC·XadIfd) = clip(±10, −3.6, 4.1) at Ec 0.9, XadIfd 2.
     # TR VIMAX VIMIN TC TB KA TA VRMAX VRMIN KC KF TF
@@ -256,6 +296,7 @@ def test_exst1_output_ceiling():
 IEEET1_OK = (0, 50, 0.05, 5, -5, 1, 0.5, 0.04, 1, 0, 2.8, 0.08, 3.7, 0.33)
 IEEEX1_OK = HAND["IEEEX1"][0]
 EXST1_OK = (0.02, 99, -99, 0, 0.02, 50, 0.02, 9999, -9999, 0, 0.01, 1)
+ESST1A_OK = HAND["ESST1A"][0]
 
 
 def edit(cons, **changes):
@@ -279,6 +320,13 @@ def edit(cons, **changes):
     ("ESST3A", (0.02, 0.2, -0.2, 8, 1, 5, 20, 0, 99, -99, 1, 3.67, 0.435, 5.48, 0.01, 0.0098,
                 3.86, 3.33, 0, 99, 0), r"CON\(19\) TM = 0 s: must be > 0"),
     ("EXST1", edit(EXST1_OK, c7=0), r"CON\(7\) TA = 0 s with KF = 0.01: .*algebraic loop"),
+    # ESST1A values (ICONs UEL, VOS first; CON(j) is value j + 2)
+    ("ESST1A", edit(ESST1A_OK, c1=4), r"ICON UEL = 4: PSS/E defines 1, 2, 3; other codes are "
+                                      r"not supported"),
+    ("ESST1A", edit(ESST1A_OK, c2=0), r"ICON VOS = 0: PSS/E defines 1, 2"),
+    ("ESST1A", edit(ESST1A_OK, c11=0), r"CON\(9\) TA = 0 s with KF = 0.02: .*algebraic loop"),
+    ("ESST1A", edit(ESST1A_OK, c12=-1000),
+     r"CON\(11\) VAMIN, CON\(10\) VAMAX: VAMIN = -999 > VAMAX = -1000"),
 ])
 def test_bad_data_names_file_line_and_con(name, cons, pattern):
     record = hand(name, cons, line=7, source="bad.dyr")

@@ -1,7 +1,8 @@
 """Dynamic simulation: flat runs, ANDES trajectories, batching, divergence, gradients, CLI.
 
 References nobody here wrote: ANDES (PyPI) time-domain runs of the PSS/E files it ships
-(`kundur.raw` + `kundur_full.dyr`, `ieee14.raw` + `ieee14.dyr`), with the same fault.
+(`kundur.raw` + `kundur_full.dyr`, `ieee14.raw` + `ieee14.dyr`, and ieee14 with ESST1A
+exciters written here), with the same fault.
 ANDES's power flow does not enforce generator Q limits, so ours is solved the same way
 for the comparison. ieee14's stabilizers (IEEEST, ST2CUT) are unsupported here and are
 removed from the DYR given to both simulators.
@@ -29,9 +30,26 @@ V_MAX_ERR, V_RMS_ERR, SPEED_ERR, ANGLE_ERR_DEG = 0.02, 0.005, 1e-3, 3.0
 # A flat run must stay within this of the power flow (issue 3).
 FLAT_TOL = 1e-4
 
-ANDES_CASES = {  # name: (raw, dyr, models removed from the DYR, fault bus)
-    "kundur": ("kundur/kundur.raw", "kundur/kundur_full.dyr", (), 8),
-    "ieee14": ("ieee14/ieee14.raw", "ieee14/ieee14.dyr", ("IEEEST", "ST2CUT"), 4),
+# ESST1A on every ieee14 machine in place of its exciters, PSS/E order (UEL VOS TR VIMAX VIMIN
+# TC TB TC1 TB1 KA TA VAMAX VAMIN VRMAX VRMIN KC KF TF KLR ILR): bus 1 has the WECC values of
+# GridPACK's 300-bus file (VIMAX 0.3 added), the others vary them so that during the bus-4
+# fault the input limit (buses 1, 3, 8), VAMAX (2), the Ec-scaled ceiling (all), the
+# field-current limiter (2), the second lead-lag (2), the rate feedback (2) and bypassed
+# lead-lags (6) act, with every UEL and VOS code. The rate feedback sits where the ceiling
+# barely binds: ANDES takes it before the EFD limiter, IEEE 421.5 and GridPACK after it (with
+# KF = 0.05 on bus 3, whose ceiling binds, the angle error grows to 3.5 degrees).
+ESST1A = """\
+1 'ESST1A' 1 1 1 0.02 0.3 -0.3 0.51 2.01 0 0 178.9 0.029 7.0 -6.0 4.48 -1.79 0.11 0 1.0 0 2.8 /
+2 'ESST1A' 1 2 2 0.01 999 -999 1.0 10.0 0.1 0.05 200 0.02 5.0 -4.0 8.0 -7.0 0.05 0.02 1.0 4.5 2.3 /
+3 'ESST1A' 1 3 1 0.02 0.2 -0.2 1.0 5.0 0 0 100 0.05 6.0 -5.0 5.0 -4.0 0.1 0 0.5 0 3.0 /
+6 'ESST1A' 1 1 2 0.015 999 -999 0 0 0 0 150 0.03 999 -999 6.0 -5.0 0.08 0 1.0 2.0 2.5 /
+8 'ESST1A' 1 2 1 0.02 0.1 -0.1 1.0 1.0 0 0 200 0.02 999 -999 7.0 -6.0 0.2 0 1.0 0 4.0 /
+"""
+ANDES_CASES = {  # name: (raw, dyr, models removed from the DYR, fault bus, records added)
+    "kundur": ("kundur/kundur.raw", "kundur/kundur_full.dyr", (), 8, ""),
+    "ieee14": ("ieee14/ieee14.raw", "ieee14/ieee14.dyr", ("IEEEST", "ST2CUT"), 4, ""),
+    "ieee14_esst1a": ("ieee14/ieee14.raw", "ieee14/ieee14.dyr",
+                      ("IEEEST", "ST2CUT", "ESST3A", "EXST1"), 4, ESST1A),
 }
 
 
@@ -40,10 +58,11 @@ def andes_files(tmp_path_factory):
     """{name: (raw path, filtered DYR path, fault bus)} for ANDES's bundled cases."""
     folder = tmp_path_factory.mktemp("andes")
     out = {}
-    for name, (raw, dyr, drop, bus) in ANDES_CASES.items():
-        out[name] = (str(andes_cases_dir() / raw),
-                     write_psse_dyr(str(andes_cases_dir() / dyr), str(folder / f"{name}.dyr"),
-                                    drop), bus)
+    for name, (raw, dyr, drop, bus, added) in ANDES_CASES.items():
+        path = write_psse_dyr(str(andes_cases_dir() / dyr), str(folder / f"{name}.dyr"), drop)
+        with open(path, "a") as f:
+            f.write(added)
+        out[name] = (str(andes_cases_dir() / raw), path, bus)
     return out
 
 

@@ -243,6 +243,32 @@ def test_bad_study_files_name_the_key_and_value(tmp_path, toml, message):
         read_study(path)
 
 
+def test_a_study_file_on_a_base_overrides_key_by_key(tmp_path):
+    """`base` names another study file (relative to this one): its tables merge key by key
+    (the base's train set keeps its buses, takes the new durations), other values replace."""
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "base.toml").write_text(
+        'name = "base"\n[grid]\nbuiltin = "ieee39_fidvr"\n[env]\nepisode = 6.0\n'
+        '[tasks.train]\nfault_buses = [4, 15]\nfault_durations = [0.05]\n')
+    derived = tmp_path / "sub" / "derived.toml"
+    derived.write_text('base = "../base.toml"\nname = "derived"\n[env]\n'
+                       'action_mask = "hadrec"\n[tasks.train]\nfault_durations = [0.0, 0.08]\n'
+                       '[params]\nc_normal = 3.0\n')
+    study = read_study(derived)
+    assert study.name == "derived" and study.config.episode == 6.0
+    assert study.config.action_mask == "hadrec" and study.params.c_normal == 3.0
+    assert study.task_set("train").fault_buses == (4, 15)
+    assert study.task_set("train").fault_durations == (0.0, 0.08)
+    assert len(study.tasks("train+test")) == 4 + len(study.tasks("test"))
+    (tmp_path / "base.toml").write_text('base = "sub/derived.toml"\n')
+    with pytest.raises(ValueError, match=r"cannot be its own base \(chain: .*derived.toml -> "
+                                         r".*base.toml -> .*derived.toml\)"):
+        read_study(derived)
+    derived.write_text('base = "nowhere.toml"\n')
+    with pytest.raises(ValueError, match=r"derived.toml: base = 'nowhere.toml': no such file"):
+        read_study(derived)
+
+
 def test_policy_of_another_layout_is_refused_by_name(tmp_path):
     """A saved policy knows its layout; evaluating it on a study with other buses names both."""
     from experiments.common.evaluation import evaluate

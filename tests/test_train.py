@@ -186,6 +186,34 @@ def test_tasks_per_iteration_fits_the_set_or_names_the_flag():
         tasks_per_iteration(study, args(9))
 
 
+def test_shaping_and_joined_task_sets_change_the_training_only(capsys):
+    """--task-set train+test trains on both sets' tasks; --shaping sets reward weights of the
+    training episodes while the study (what evaluations and the saved study use) keeps its
+    own; bad items name the flag."""
+    from experiments.common.training import shaping
+    from jaxgrid.rollouts import training_problem
+
+    study = builtin("ieee39_fidvr")
+    weights = shaping(["c_normal=30", "c_shed=200"])
+    assert weights == (("c_normal", 30.0), ("c_shed", 200.0))
+    problem = training_problem(study, "lstm", task_set="train+test", shaping=dict(weights))
+    assert problem.tasks.point.shape == (len(study.tasks("train")) + len(study.tasks("test")),)
+    assert (problem.episode.params.c_normal, problem.episode.params.c_shed) == (30.0, 200.0)
+    assert study.params.c_normal == 0.0 and problem.info["shaping"] == dict(weights)
+    with pytest.raises(ValueError, match=r"stratified sampling draws from one task set"):
+        training_problem(study, "lstm", task_set="train+test", sampling="stratified")
+    for items, message in ((["c_volt=1"], r"--shaping 'c_volt=1': FIELD=VALUE with FIELD one "
+                                          r"of c_voltage, c_shed"),
+                           (["c_normal=-1"], r"--shaping c_normal = -1.0: must lie in"),
+                           (["c_normal=x"], r"VALUE must be a number"),
+                           (["c_shed=1", "c_shed=2"], r"a field given twice")):
+        with pytest.raises(ValueError, match=message):
+            shaping(items)
+    assert run(["--shaping", "c_volt=1", "--iterations", "1", "--out", "unused"],
+               "train_39bus") == 2
+    assert "--shaping 'c_volt=1'" in capsys.readouterr().err
+
+
 def test_task_batch_auto_is_every_task_on_a_gpu_and_the_preset_elsewhere(monkeypatch, capsys):
     """--task-batch 'auto' (the default) is the command's preset on CPUs (one task per batch
     for the 300-bus command) and all m tasks in one batch (None) on a GPU; a number is kept;

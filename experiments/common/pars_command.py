@@ -12,7 +12,7 @@ import jax
 
 from experiments.common.studyargs import add_study_arguments, study_from_args
 from experiments.common.training import (COMMANDS, PAPER_PRESETS, TASKS_PER_ITERATION, Choices,
-                                         train_study, widths)
+                                         shaping, train_study, widths)
 
 SMALL, LARGE = PAPER_PRESETS["small"], PAPER_PRESETS["large"]
 
@@ -33,6 +33,11 @@ def parser(command: str) -> argparse.ArgumentParser:
     p.add_argument("--obs-clip", type=float,
                    help="clip the policy's normalised inputs to ± this many standard "
                         "deviations (default: no clip, as the paper)")
+    p.add_argument("--obs-std-floor", type=float,
+                   help="the observation normaliser's smallest standard deviation of a "
+                        "varying input, in its units (p.u. for voltages; default: none, as "
+                        "the paper): an input that hardly moves in training is scaled by at "
+                        "most 1/FLOOR")
     p.add_argument("--history", type=int,
                    help="observations stacked (default: the study's for the policy kind, "
                         "[training] history; the PNNL study files give 10 for linear and FNN, "
@@ -61,10 +66,16 @@ def parser(command: str) -> argparse.ArgumentParser:
     p.add_argument("--compact-chunks", type=int, default=4,
                    help="the episodes still running continue in chunks of 1/K of a batch, "
                         "as many as they fill")
-    p.add_argument("--task-set", default="train", help="the study's task set to train on")
+    p.add_argument("--task-set", default="train",
+                   help="the study's task set to train on, or several joined by '+' "
+                        "(uniform sampling), e.g. train+train_extra")
     p.add_argument("--task-sampling", choices=["uniform", "stratified"],
                    help="m distinct tasks uniformly, or k buses × k' durations as the paper "
                         "(default: the study's [training] task_sampling)")
+    p.add_argument("--shaping", nargs="+", default=(), metavar="FIELD=VALUE",
+                   help="reward weights used in training only, e.g. c_normal=30 (fields of "
+                        "the study's [params]: c_voltage, c_shed, c_invalid, c_normal, "
+                        "c_prefault, unstable_penalty); evaluations keep the study's")
     p.add_argument("--iterations", type=int, default=defaults["iterations"],
                    help="total iterations of the run (with --resume: continue up to it)")
     p.add_argument("--seed", type=int, default=0)
@@ -96,7 +107,8 @@ def run(argv: list[str] | None, command: str) -> int:
         study = study_from_args(args, str(saved_study) if args.resume and saved_study.is_file()
                                 else None)
         names = {f.name for f in dataclasses.fields(Choices)}
-        train_study(study, Choices(**{k: v for k, v in vars(args).items() if k in names}))
+        chosen = {k: v for k, v in vars(args).items() if k in names}
+        train_study(study, Choices(**{**chosen, "shaping": shaping(args.shaping)}))
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -44,19 +44,23 @@ class Choices:
     Attributes:
       policy: "linear" | "fnn" | "lstm".  hidden: layer widths (linear: none).
       obs_clip: ± standard deviations of the normalised inputs, or None (no clip).
+      obs_std_floor: the normaliser's smallest standard deviation, or None (none).
       history: observations stacked (None: the study's for the policy kind).
       directions: N.  top: b (None: N/2).  step_size: α.  noise: ν.  decay: ε.
       tasks_per_iteration: m (None: TASKS_PER_ITERATION, or the whole set if smaller).
       task_batch: tasks per rollout batch, or "auto" (`task_batch`).
       compact_after: "auto" | "check" | "off" | a number of agent steps (`compact_after`).
-      compact_chunks: K.  task_set: the study's set to train on.  task_sampling: "uniform"
-      | "stratified" (None: the study's).  episode: s (None: the study's).  seed: the first.
+      compact_chunks: K.  task_set: the study's set to train on (several joined by "+").
+      task_sampling: "uniform" | "stratified" (None: the study's).
+      shaping: ((EnvParams reward field, value), ...) in place of the study's in training
+        only (`shaping`): evaluations, and the study saved with the run, keep the study's.  episode: s (None: the study's).  seed: the first.
       iterations, seeds, checkpoint_every, out, resume: as `ars.train.TrainConfig`.
     """
 
     policy: str = "lstm"
     hidden: tuple[int, ...] | None = None
     obs_clip: float | None = None
+    obs_std_floor: float | None = None
     history: int | None = None
     directions: int | None = None
     top: int | None = None
@@ -69,6 +73,7 @@ class Choices:
     compact_chunks: int = 4
     task_set: str = "train"
     task_sampling: str | None = None
+    shaping: tuple[tuple[str, float], ...] = ()
     episode: float | None = None
     seed: int = 0
     iterations: int = 200
@@ -90,7 +95,8 @@ def train_config(study, choices: Choices = Choices()) -> TrainConfig:
                       task_batch=task_batch(choices.task_batch, preset["task_batch"]),
                       compact_after=compact_after(choices.compact_after, study,
                                                   choices.task_set, choices.episode),
-                      compact_chunks=choices.compact_chunks, seed=choices.seed)
+                      compact_chunks=choices.compact_chunks,
+                      obs_std_floor=choices.obs_std_floor, seed=choices.seed)
     hidden = choices.hidden if choices.hidden is not None else (
         () if choices.policy == "linear" else preset["hidden"])
     return TrainConfig(policy=choices.policy, hidden=tuple(hidden), obs_clip=choices.obs_clip,
@@ -105,7 +111,33 @@ def problem(study, choices: Choices = Choices()):
     from jaxgrid.rollouts import training_problem
 
     return training_problem(study, choices.policy, choices.history, choices.episode,
-                            choices.task_set, choices.task_sampling)
+                            choices.task_set, choices.task_sampling, dict(choices.shaping))
+
+
+SHAPING_FIELDS = ("c_voltage", "c_shed", "c_invalid", "c_normal", "c_prefault",
+                  "unstable_penalty")
+
+
+def shaping(items) -> tuple[tuple[str, float], ...]:
+    """`Choices.shaping` of --shaping FIELD=VALUE items (reward weights of
+    `jaxgrid.env.EnvParams`, in their ranges); ValueError naming the flag and the item."""
+    from jaxgrid.env import check_params
+
+    pairs = []
+    for item in items:
+        field, _, value = item.partition("=")
+        if field not in SHAPING_FIELDS:
+            raise ValueError(f"--shaping {item!r}: FIELD=VALUE with FIELD one of "
+                             f"{', '.join(SHAPING_FIELDS)}")
+        try:
+            number = float(value)
+        except ValueError:
+            raise ValueError(f"--shaping {item!r}: VALUE must be a number") from None
+        check_params({field: number}, key=lambda f: f"--shaping {f}")
+        pairs.append((field, number))
+    if len({f for f, _ in pairs}) < len(pairs):
+        raise ValueError(f"--shaping {' '.join(items)}: a field given twice")
+    return tuple(pairs)
 
 
 def widths(hidden: str) -> tuple[int, ...]:

@@ -6,16 +6,21 @@ the simulation benchmark and the command `experiments.reference.andes`.
 ANDES reads the same PSS/E RAW and DYR files; its `Toggle` records are not part of PSS/E and
 must not be in the DYR. ANDES converts constant-power loads to constant impedance in
 time-domain simulation by default (`PQ.config.p2z = q2z = 1`), which matches `LoadSplit()`'s
-default.
+default. ANDES 2.0's DYR reader takes the values of an ESST1A record in another order than
+PSS/E's (andes/io/psse-dyr.yaml; measured: PSS/E's TC lands in its TB, KA in VAMAX, VRMAX in
+ILR, ...), so `run_andes` hands it a copy with those records in its own order (`andes_dyr`).
 """
 from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import re
 import time
 
 import numpy as np
+
+from jaxgrid.models.exciters import Esst1a
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,7 +45,8 @@ def run_andes(raw: str, dyr: str, t_end: float, fault_bus: int | None = None,
     import andes
 
     andes.config_logger(stream_level=logging.ERROR)
-    ss = andes.load(raw, addfile=dyr, setup=False, no_output=True, default_config=True)
+    ss = andes.load(raw, addfile=andes_dyr(dyr), setup=False, no_output=True,
+                    default_config=True)
     if fault_bus is not None:
         ss.add("Fault", {"bus": fault_bus, "tf": fault_start,
                          "tc": fault_start + fault_duration, "xf": fault_x, "rf": 0.0})
@@ -64,6 +70,42 @@ def run_andes(raw: str, dyr: str, t_end: float, fault_bus: int | None = None,
         wall_s=wall)
 
 
+def andes_dyr(dyr: str) -> str:
+    """`dyr` itself, or where it has ESST1A records a copy beside it (suffix `.andes.dyr`)
+    whose ESST1A records list their values in the order ANDES's DYR reader assigns them (its
+    psse-dyr.yaml `inputs`) instead of PSS/E's (`Esst1a`: the ICONs, then the CONs)."""
+    import andes
+    import yaml
+
+    with open(dyr) as f:
+        records = f.read().split("/")
+    if not any(_model(r) == "ESST1A" for r in records[:-1]):
+        return dyr
+    with open(os.path.join(os.path.dirname(andes.__file__), "io", "psse-dyr.yaml")) as f:
+        inputs = yaml.safe_load(f)["ESST1A"]["inputs"][2:]  # after BUS, ID
+    psse = [*Esst1a.icon_codes, *(c.name.upper() for c in Esst1a.cons)]
+    assert sorted(inputs) == sorted(psse), f"ANDES's ESST1A inputs {inputs} are not {psse}"
+
+    def reordered(record: str) -> str:
+        if _model(record) != "ESST1A":
+            return record
+        before, after = re.split(r"'\s*ESST1A\s*'", record, maxsplit=1)
+        device_id, *values = after.split()
+        by_name = dict(zip(psse, values))
+        return f"{before}'ESST1A' {device_id} " + " ".join(by_name[n] for n in inputs) + " "
+
+    target = os.path.splitext(dyr)[0] + ".andes.dyr"
+    with open(target, "w") as f:
+        f.write("/".join(reordered(r) for r in records[:-1]) + "/\n")
+    return target
+
+
+def _model(record: str) -> str:
+    """The (quoted) model name of a DYR record's text, upper case, or ''."""
+    quoted = re.search(r"'\s*([^'\s]+)\s*'", record)
+    return quoted.group(1).upper() if quoted else ""
+
+
 def write_psse_dyr(source: str, target: str, drop_models: tuple[str, ...] = ()) -> str:
     """Copy a DYR file without ANDES-only `Toggle` records and without `drop_models` records.
 
@@ -73,12 +115,7 @@ def write_psse_dyr(source: str, target: str, drop_models: tuple[str, ...] = ()) 
     with open(source) as f:
         records = f.read().split("/")
     drop = {m.upper() for m in drop_models} | {"TOGGLE"}
-
-    def model(record: str) -> str:
-        quoted = re.search(r"'\s*([^'\s]+)\s*'", record)
-        return quoted.group(1).upper() if quoted else ""
-
-    keep = [r for r in records[:-1] if model(r) not in drop]
+    keep = [r for r in records[:-1] if _model(r) not in drop]
     with open(target, "w") as f:
         f.write("/".join(keep) + "/\n")
     return target

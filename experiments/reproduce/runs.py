@@ -155,18 +155,29 @@ class Runs:
 
     def pars_folder(self, policy: str, directions: int) -> Path:
         """The run folder of that PARS training (made, not trained), named by its config."""
-        choices = self.pars_choices(policy, directions)
+        return self.choices_folder(f"pars_{policy}_N{directions}",
+                                   self.pars_choices(policy, directions))
+
+    def choices_folder(self, kind: str, choices: Choices) -> Path:
+        """OUT/runs/KIND-HASH of the PARS training of `choices` (made, not trained), named by
+        its `ars.train.TrainConfig`, history, sampling and training-only shaping."""
         config = train_config(self.study, choices)
         inputs = {k: v for k, v in dataclasses.asdict(config).items()
                   if k not in ("out", "resume")}
         for speed_only in ("compact_after", "compact_chunks"):  # folders named as before them
             inputs["pars"].pop(speed_only)
+        if inputs["pars"]["obs_std_floor"] is None:  # named as before it
+            inputs["pars"].pop("obs_std_floor")
         if inputs["obs_clip"] is None:  # named as before it
             inputs.pop("obs_clip")
         inputs["pars"]["task_batch"] = self.preset["task_batch"]  # the same on a GPU
-        return self.folder(f"pars_{policy}_N{directions}",
-                           {"config": inputs, "history": choices.history,
-                            "sampling": choices.task_sampling})
+        named = {"config": inputs, "history": choices.history,
+                 "sampling": choices.task_sampling}
+        if choices.task_set != "train":
+            named["task_set"] = choices.task_set
+        if choices.shaping:
+            named["shaping"] = dict(choices.shaping)
+        return self.folder(kind, named)
 
     def pars_finished(self, folder: Path) -> bool:
         rows = metrics_rows(folder / "metrics.jsonl")
@@ -176,13 +187,18 @@ class Runs:
     def pars(self, policy: str, directions: int) -> Path:
         """A finished PARS training (`pars_choices`, `experiments.common.training.train_study`); its
         folder. An interrupted one resumes from its last checkpoint."""
-        folder = self.pars_folder(policy, directions)
+        return self.trained(self.pars_folder(policy, directions),
+                            self.pars_choices(policy, directions))
+
+    def trained(self, folder: Path, choices: Choices) -> Path:
+        """`folder` (`choices_folder`) holding the finished training of `choices`, trained or
+        resumed from its last checkpoint unless it is finished."""
         self.trainings.add(folder)
-        if self.pars_finished(folder):
+        rows = metrics_rows(folder / "metrics.jsonl")
+        if rows and rows[-1]["iteration"] >= choices.iterations and (folder / "policy").is_dir():
             return folder
         resume = any((folder / "checkpoints").glob("[0-9]*"))
-        train_study(self.study, dataclasses.replace(self.pars_choices(policy, directions),
-                                                    out=str(folder), resume=resume))
+        train_study(self.study, dataclasses.replace(choices, out=str(folder), resume=resume))
         return folder
 
     def training_time(self) -> tuple[float, list[str]]:

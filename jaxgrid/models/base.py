@@ -45,11 +45,30 @@ class ModelError(ValueError):
     """Dynamic data that a model cannot use (names the file, line, device and field)."""
 
 
+SENTINELS = (999.0, 9999.0)  # the values WECC and PSS/E data use to switch a function off
+
+
+@dataclasses.dataclass(frozen=True)
+class Sentinel:
+    """How a CON reads the WECC/PSS/E values that switch its function off: 999 and 9999
+    (their negatives where the CON is a lower limit), where the model's comparison makes such
+    a value mean `meaning` (e.g. a reclose voltage of 999 p.u. is never exceeded: "never
+    recloses"). The table of every declaration is in docs/models.md ("Sentinel values")."""
+
+    meaning: str
+    lower: bool = False
+
+    @property
+    def values(self) -> tuple[float, ...]:
+        return tuple(-v if self.lower else v for v in SENTINELS)
+
+
 @dataclasses.dataclass(frozen=True)
 class Con:
     """One PSS/E CON: lower-case name, unit, meaning and allowed closed range [lo, hi].
 
-    `positive` excludes the lower bound 0 itself (time constants that divide).
+    `positive` excludes the lower bound 0 itself (time constants that divide). `sentinel`:
+    the WECC/PSS/E "off" values the CON also accepts, outside [lo, hi] too (`Sentinel`).
     """
 
     name: str
@@ -58,16 +77,35 @@ class Con:
     lo: float = -INF
     hi: float = INF
     positive: bool = False
+    sentinel: Sentinel | None = None
 
     def check(self, value: float) -> str | None:
         """A reason why `value` is not allowed, or None."""
         if not math.isfinite(value):
             return "must be finite"
+        if self.sentinel is not None and value in self.sentinel.values:
+            return None
         if self.positive and value <= 0:
             return "must be > 0"
         if not self.lo <= value <= self.hi:
             return f"must lie in [{self.lo}, {self.hi}]"
         return None
+
+    def admits(self, values: Array) -> Array:
+        """`check` on an array, jnp (run time: `jaxgrid.simulate.parameters_valid`): True
+        where the value is allowed (finiteness is checked separately)."""
+        ok = (values >= self.lo) & (values <= self.hi) & ((values > 0) | (not self.positive))
+        if self.sentinel is None:
+            return ok
+        return ok | jnp.isin(values, jnp.asarray(self.sentinel.values, values.dtype))
+
+    def sentinel_meaning(self, value: float) -> str | None:
+        """What `value` means when only its reading as a sentinel admits it (outside
+        [lo, hi]), else None (an ordinary value: a time of 9999 s within the range is
+        simply never reached)."""
+        if self.sentinel is None or value not in self.sentinel.values:
+            return None
+        return None if self.lo <= value <= self.hi else self.sentinel.meaning
 
 
 def device_label(record: DyrRecord) -> str:
@@ -247,6 +285,24 @@ class DeviceModel:
             if reason:
                 raise ModelError(f"{device_label(rec)}: {reason}")
         return params
+
+    @classmethod
+    def sentinel_notes(cls, records: Sequence[DyrRecord]) -> list[str]:
+        """One build note per CON and value read as a sentinel (`Con.sentinel_meaning`),
+        naming the first record and counting the others."""
+        found: dict[tuple[int, float], list[DyrRecord]] = {}
+        for rec in records:
+            for j, (con, value) in enumerate(zip(cls.cons, rec.cons[cls.n_icons:])):
+                if con.sentinel_meaning(value):
+                    found.setdefault((j, value), []).append(rec)
+        notes = []
+        for (j, value), recs in found.items():
+            con = cls.cons[j]
+            more = f" (and {len(recs) - 1} more {cls.name} records)" if len(recs) > 1 else ""
+            notes.append(f"{device_label(recs[0])}{more}: CON({j + 1}) {con.name.upper()} = "
+                         f"{value:g} {con.unit} lies outside [{con.lo:g}, {con.hi:g}]: read as "
+                         f"the WECC/PSS/E sentinel: {con.sentinel_meaning(value)}")
+        return notes
 
     @classmethod
     def check_icons(cls, record: DyrRecord, icons: Sequence[float]) -> None:

@@ -1,8 +1,8 @@
-"""Excitation systems: IEEET1, IEEEX1, EXDC1, EXDC2, ESDC1A, SEXS, ESST3A, EXST1.
+"""Excitation systems: IEEET1, IEEEX1, EXDC1, EXDC2, ESDC1A, SEXS, ESST3A, EXST1, ESST1A.
 
 Equations, CON orders and initialisation follow `shared/specs/machines-exciters-governors.md`
-§0 and §4-§8 (PSS/E data layouts, IEEE 421.5 block diagrams); EXST1 follows the PSS/E / IEEE
-ST1A structure described in its class. Voltages are per unit on the machine base, time
+§0 and §4-§8 (PSS/E data layouts, IEEE 421.5 block diagrams); EXST1 and ESST1A follow the
+PSS/E / IEEE 421.5 ST1A structure described in their classes. Voltages are per unit on the machine base, time
 constants in seconds. Every model reads the signals of `ExciterPorts` and returns the field
 voltage EFD (p.u.). There are no stabilizer models, so the PSS input Vs is 0 throughout.
 
@@ -18,9 +18,9 @@ from typing import ClassVar, NamedTuple
 
 import jax.numpy as jnp
 
-from jaxgrid.models.base import (Array, Con, DeviceModel, Initial, Params, Signals,
-                                 StartPoint, States, freeze_at_limits, lag, lead_lag_output,
-                                 outside_limits, quadratic_saturation,
+from jaxgrid.models.base import (Array, Con, DeviceModel, Initial, ModelError, Params, Signals,
+                                 StartPoint, States, device_label, freeze_at_limits, lag,
+                                 lead_lag_output, outside_limits, quadratic_saturation,
                                  quadratic_saturation_constants, safe, saturation_problem)
 
 _TR = Con("tr", "s", "voltage transducer time constant (0: bypassed)", 0.0)
@@ -56,6 +56,19 @@ def _order_problem(model: type[DeviceModel], p: dict[str, float],
         if p[lo] > p[hi]:
             return f"{_label(model, lo, hi)}: {lo.upper()} = {p[lo]:g} > {hi.upper()} = {p[hi]:g}"
     return None
+
+
+def _static_problem(model: type[DeviceModel], p: dict[str, float],
+                    *pairs: tuple[str, str]) -> str | None:
+    """Why an ST1-type exciter's data cannot be used, or None: a reversed limit pair, TF = 0
+    with KF ≠ 0, or TA = 0 with KF ≠ 0 (the rate feedback of the algebraic regulator would
+    form an algebraic loop)."""
+    problem = _order_problem(model, p, *pairs) or _feedback_problem(model, p, "tf")
+    if problem is None and p["kf"] != 0 and p["ta"] == 0:
+        problem = (f"{_label(model, 'ta')} = 0 s with KF = {p['kf']:g}: the rate feedback of "
+                   "the algebraic regulator would form an algebraic loop; needs TA > 0 or "
+                   "KF = 0")
+    return problem
 
 
 def _feedback_problem(model: type[DeviceModel], p: dict[str, float], tf: str) -> str | None:
@@ -395,14 +408,7 @@ class Exst1(ExciterModel):
 
     @classmethod
     def check_combination(cls, p):
-        problem = (_order_problem(cls, p, ("vimin", "vimax"), ("vrmin", "vrmax"))
-                   or _feedback_problem(cls, p, "tf"))
-        if problem:
-            return problem
-        if p["kf"] != 0 and p["ta"] == 0:
-            return (f"{_label(cls, 'ta')} = 0 s with KF = {p['kf']:g}: the rate feedback of the "
-                    "algebraic EFD would form an algebraic loop; needs TA > 0 or KF = 0")
-        return None
+        return _static_problem(cls, p, ("vimin", "vimax"), ("vrmin", "vrmax"))
 
     @classmethod
     def output_bounds(cls, p: Params, inp: ExciterPorts) -> tuple[Array, Array]:
@@ -439,4 +445,103 @@ class Exst1(ExciterModel):
                 "efd": outside_limits(x["vr"], x["vm"] * p["vrmin"], p["efd_max0"])}
 
 
-EXCITERS = {m.name: m for m in (Ieeet1, Ieeex1, Exdc1, Exdc2, Esdc1a, Sexs, Esst3a, Exst1)}
+class Esst1a(ExciterModel):
+    """PSS/E ESST1A / IEEE 421.5-2005 ST1A static exciter (not in the spec; PSS/E ICON and CON
+    order: UEL, VOS; TR, VIMAX, VIMIN, TC, TB, TC1, TB1, KA, TA, VAMAX, VAMIN, VRMAX, VRMIN,
+    KC, KF, TF, KLR, ILR).
+
+    Vi = clip(Vref − Vm − VF, VIMIN, VIMAX); lead-lags (TC, TB) then (TC1, TB1) → VLL;
+    TA dVA/dt = KA·VLL − VA, non-windup [VAMIN, VAMAX] (VA = clip(KA·VLL) when TA = 0); the
+    field-current limiter VLR = KLR·max(XadIfd − ILR, 0); EFD = clip(VA − VLR, Ec·VRMIN,
+    Ec·VRMAX − KC·XadIfd) (the EXST1 output limits); VF = KF·s/(1 + sTF) of EFD. States: vm,
+    xll, xll1 (the two lead-lag states), va, xf (rate-feedback lag), p.u.
+
+    The ICONs place signals no model here provides: UEL 1-3, where an under-excitation
+    limiter's output enters (summing point, HV gate before the lead-lags, HV gate after VA),
+    and VOS 1-2, where a stabilizer's (voltage error, after VA). Without those signals the HV
+    gates pass VA and every allowed code gives the same model; other codes are refused, as is
+    TA = 0 with KF ≠ 0 (algebraic loop through VF). ANDES (the reference of the tests) takes its
+    rate feedback before the EFD limiter, the same while the limiter does not bind; its DYR
+    reader lists ESST1A values in another order than PSS/E's
+    (`experiments.reference.andes_files.andes_dyr`). `init` stores `efd_max0`, the EFD
+    ceiling at t = 0, for `init_violations`.
+    """
+
+    name = "ESST1A"
+    n_icons = 2  # UEL, VOS
+    cons = (_TR, _VIMAX, _VIMIN, _TC, _TB,
+            dataclasses.replace(_TC, name="tc1", info="second lead-lag numerator time constant"),
+            dataclasses.replace(_TB, name="tb1", info="second lead-lag denominator time "
+                                                       "constant (0: bypassed)"),
+            _KA, _TA,
+            Con("vamax", "p.u.", "regulator output VA upper limit"),
+            Con("vamin", "p.u.", "regulator output VA lower limit"),
+            dataclasses.replace(_VRMAX, info="EFD ceiling per unit Ec (Ec·VRMAX − KC·XadIfd)"),
+            dataclasses.replace(_VRMIN, info="EFD floor per unit Ec (Ec·VRMIN)"),
+            Con("kc", "p.u.", "rectifier loading factor", 0.0), _KF, _TF,
+            Con("klr", "p.u.", "field-current limiter gain", 0.0),
+            Con("ilr", "p.u.", "field-current limiter pickup XadIfd"))
+    states = ("vm", "xll", "xll1", "va", "xf")
+    icon_codes = {"UEL": (1, 2, 3), "VOS": (1, 2)}
+
+    @classmethod
+    def check_icons(cls, record, icons):
+        for (name, allowed), value in zip(cls.icon_codes.items(), icons):
+            if value not in allowed:
+                raise ModelError(f"{device_label(record)}: ICON {name} = {value:g}: PSS/E "
+                                 f"defines {', '.join(map(str, allowed))}; other codes are "
+                                 "not supported")
+
+    @classmethod
+    def check_combination(cls, p):
+        return _static_problem(cls, p, ("vimin", "vimax"), ("vamin", "vamax"),
+                               ("vrmin", "vrmax"))
+
+    @classmethod
+    def limits(cls, p):
+        return {"va": (p["vamin"], p["vamax"])}
+
+    @classmethod
+    def current_limit(cls, p: Params, xadifd: Array) -> Array:
+        """VLR = KLR·max(XadIfd − ILR, 0), p.u."""
+        return p["klr"] * jnp.maximum(xadifd - p["ilr"], 0.0)
+
+    @classmethod
+    def init(cls, p, start):
+        efd0, inp = start
+        va0 = efd0 + cls.current_limit(p, inp.xadifd)
+        vi0 = va0 / p["ka"]
+        x = {"vm": inp.ec, "xll": vi0, "xll1": vi0, "va": va0, "xf": efd0}
+        p = dict(p, vref=inp.ec + vi0, efd_max0=Exst1.output_bounds(p, inp)[1])
+        return Initial(p, x, {})
+
+    @classmethod
+    def rates(cls, p, x, inp):
+        lo, hi = Exst1.output_bounds(p, inp)
+        vlr = cls.current_limit(p, inp.xadifd)
+        vm = jnp.where(p["tr"] > 0, x["vm"], inp.ec)
+        # VF from the state-based EFD: the output where TA > 0, and KF = 0 elsewhere
+        vf = p["kf"] / safe(p["tf"]) * (jnp.clip(x["va"] - vlr, lo, hi) - x["xf"])
+        vi = jnp.clip(p["vref"] - vm - vf, p["vimin"], p["vimax"])
+        y = lead_lag_output(x["xll"], vi, p["tc"], p["tb"])
+        drive = p["ka"] * lead_lag_output(x["xll1"], y, p["tc1"], p["tb1"])
+        va = jnp.where(p["ta"] > 0, x["va"], jnp.clip(drive, p["vamin"], p["vamax"]))
+        efd = jnp.clip(va - vlr, lo, hi)
+        dx = {"vm": lag(x["vm"], inp.ec, p["tr"]),
+              "xll": lag(x["xll"], vi, p["tb"]),
+              "xll1": lag(x["xll1"], y, p["tb1"]),
+              "va": freeze_at_limits(lag(x["va"], drive, p["ta"]), x["va"],
+                                     p["vamin"], p["vamax"]),
+              "xf": lag(x["xf"], efd, p["tf"])}
+        return efd, dx
+
+    @classmethod
+    def init_violations(cls, p, x):
+        # at t = 0: vm = Ec, xll = Vi0, xf = EFD0
+        return super().init_violations(p, x) | {
+            "vi": outside_limits(x["xll"], p["vimin"], p["vimax"]),
+            "efd": outside_limits(x["xf"], x["vm"] * p["vrmin"], p["efd_max0"])}
+
+
+EXCITERS = {m.name: m for m in (Ieeet1, Ieeex1, Exdc1, Exdc2, Esdc1a, Sexs, Esst3a, Exst1,
+                                Esst1a)}

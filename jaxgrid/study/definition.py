@@ -227,8 +227,9 @@ class Study:
         return self.definition.tasks[name]
 
     def tasks(self, name: str) -> list[TaskSpec]:
-        """The specs of the named task set (every operating point × fault × duration)."""
-        return self.task_set(name).specs(self.n_points)
+        """The specs of the named task set (every operating point × fault × duration), or of
+        several joined by "+" ("train+train_extra": theirs in that order)."""
+        return [s for part in name.split("+") for s in self.task_set(part).specs(self.n_points)]
 
     def batch(self, specs) -> PointTask:
         """Stacked PointTask of specs (any operating points of this study)."""

@@ -40,7 +40,7 @@ def load_study(spec: str) -> Study:
                      "study file (.toml)")
 
 
-_SECTIONS = {"name", "grid", "compile", "env", "params", "tasks", "training"}
+_SECTIONS = {"name", "base", "grid", "compile", "env", "params", "tasks", "training"}
 
 
 def read_study(path: str | Path, raw=None) -> Study:
@@ -50,29 +50,15 @@ def read_study(path: str | Path, raw=None) -> Study:
     grid, every task set at all of them (a set's operating_points index the file's points),
     so a policy trained on the study runs there (`--study FILE --raw R ...`)."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as err:
-        raise ValueError(f"{path}: cannot read a study file: {err}") from None
-    unknown = sorted(set(data) - _SECTIONS)
-    if unknown:
-        raise ValueError(f"{path}: unknown keys {unknown}; allowed: {sorted(_SECTIONS)}")
-    base = path.parent
-    grid = dict(_table(data.get("grid", {}), path, "grid"))
-    for key in ("dyr", "task_config", "sim_config"):
-        if key in grid:
-            grid[key] = str(_path(base, grid[key], path, f"grid.{key}"))
+    data = _file_tables(path)
+    grid = dict(data.get("grid", {}))
     if raw is not None:
         if "builtin" in grid:
             raise ValueError(f"{path}: grid.builtin = {grid['builtin']!r}: a built-in's operating "
                              "points are load levels (--load-levels), not RAW files")
         grid["raw"] = [str(Path(r).resolve()) for r in raw]
     elif "raw" in grid:
-        raws = [grid["raw"]] if isinstance(grid["raw"], str) else grid["raw"]
-        if not isinstance(raws, list):
-            raise ValueError(f"{path}: grid.raw = {raws!r}: must be a path, a pattern or a "
-                             "list of them")
-        grid["raw"] = [str(p) for r in raws for p in _paths(base, r, path)]
+        grid["raw"] = [str(p) for file, r in grid["raw"] for p in _paths(file.parent, r, file)]
     source = _typed(GridSource, grid, path, "grid")
     compile_settings = _typed(CompileSettings, data.get("compile", {}), path, "compile")
     env = _fields(EnvConfig, data.get("env", {}), path, "env")
@@ -87,6 +73,49 @@ def read_study(path: str | Path, raw=None) -> Study:
         raise ValueError(f"{path}: name = {name!r}: must be a string")
     return build(source, name=name, compile=compile_settings, env=env, params=params,
                  tasks=tasks, training=training, origin=str(path))
+
+
+def _file_tables(path: Path, seen: tuple[Path, ...] = ()) -> dict:
+    """The tables of a study file with its grid paths absolute, laid over those of the file
+    its `base` names (a path relative to it, read the same way): a table merges key by key
+    into the base's, any other value replaces the base's."""
+    path = path.resolve()
+    if path in seen:
+        raise ValueError(f"{seen[-1]}: base = {str(path)!r}: a study file cannot be its own "
+                         f"base (chain: {' -> '.join(map(str, (*seen, path)))})")
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise ValueError(f"{path}: cannot read a study file: {err}") from None
+    unknown = sorted(set(data) - _SECTIONS)
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {unknown}; allowed: {sorted(_SECTIONS)}")
+    folder = path.parent
+    grid = dict(_table(data.get("grid", {}), path, "grid"))
+    for key in ("dyr", "task_config", "sim_config"):
+        if key in grid:
+            grid[key] = str(_path(folder, grid[key], path, f"grid.{key}"))
+    if "raw" in grid:
+        raws = [grid["raw"]] if isinstance(grid["raw"], str) else grid["raw"]
+        if not isinstance(raws, list):
+            raise ValueError(f"{path}: grid.raw = {raws!r}: must be a path, a pattern or a "
+                             "list of them")
+        grid["raw"] = [(path, r) for r in raws]  # expanded by `read_study` unless replaced
+    if "grid" in data:
+        data["grid"] = grid
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    return _merged(_file_tables(_path(folder, base, path, "base"), (*seen, path)), data)
+
+
+def _merged(base: dict, over: dict) -> dict:
+    """`over` laid over `base`: tables (dicts) merged key by key, other values replaced."""
+    out = dict(base)
+    for key, value in over.items():
+        both = isinstance(value, dict) and isinstance(out.get(key), dict)
+        out[key] = _merged(out[key], value) if both else value
+    return out
 
 
 def write_study(study: Study | StudyDefinition, path: str | Path) -> None:

@@ -1,0 +1,218 @@
+"""Ablations of PARS trainings: each row a study and training flags, trained at several seeds
+and scored per kind of task against UVLS on several task sets.
+
+    python -m experiments.ablation results/pnnl39/ablation.toml [--only paper mask ...]
+        [--no-train]
+
+The file (TOML; paths relative to it):
+
+    out = "ablation"                      # runs, evaluations, ablation.json, ABLATION.md
+    seeds = 3                             # per row, vmapped in one program (--seeds)
+    iterations = 500
+    task_sets = ["test", "generalisation"]   # each row's study's sets to score on
+    [[rows]]
+    name = "paper"
+    study = "../../studies/ieee39_pnnl.toml"
+    flags = []                            # experiments.train flags (after --seeds/--iterations)
+    why = "the paper's settings"          # one line for the table
+
+Each row's seeds train as one program in a run folder named by the study and the training
+(`experiments.reproduce.runs.Runs`: a finished row is reused, an interrupted one resumes);
+every seed's final policy, no control and UVLS are evaluated on each task set in the row's
+own study (its environment binds every controller alike; evaluations are cached), and scored
+per kind of task (`experiments.common.scores`). `--no-train` tabulates the rows already
+trained. Writes OUT/ablation.json (every seed's record) and OUT/ABLATION.md (one table per
+task set: per row the mean over seeds and the range).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from experiments.common.pars_command import parser as train_parser
+from experiments.common.scores import scores, targets_met
+from experiments.common.training import Choices, shaping
+from experiments.reproduce.runs import FULL, Runs, metrics_rows
+
+SPEC_KEYS = {"out", "seeds", "iterations", "task_sets", "rows"}
+ROW_KEYS = {"name", "study", "flags", "why"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Row:
+    """One configuration: name, study file (absolute), experiments.train flags, why."""
+
+    name: str
+    study: str
+    flags: tuple[str, ...]
+    why: str
+
+
+@dataclasses.dataclass(frozen=True)
+class Spec:
+    """An ablation file's contents (module docstring), paths absolute."""
+
+    path: Path
+    out: Path
+    seeds: int
+    iterations: int
+    task_sets: tuple[str, ...]
+    rows: tuple[Row, ...]
+
+
+def read_spec(path: str | Path) -> Spec:
+    """The ablation file; ValueError naming the file and key of a bad entry."""
+    path = Path(path).resolve()
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise ValueError(f"{path}: cannot read an ablation file: {err}") from None
+    unknown = sorted(set(data) - SPEC_KEYS)
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {unknown}; allowed: {sorted(SPEC_KEYS)}")
+    for key, kind in (("out", str), ("seeds", int), ("iterations", int), ("task_sets", list),
+                      ("rows", list)):
+        if not isinstance(data.get(key), kind) or isinstance(data.get(key), bool):
+            raise ValueError(f"{path}: {key} = {data.get(key)!r}: must be a {kind.__name__}")
+    if data["seeds"] < 1 or data["iterations"] < 1 or not data["task_sets"] or not data["rows"]:
+        raise ValueError(f"{path}: seeds and iterations must be >= 1, task_sets and rows "
+                         "not empty")
+    rows = []
+    for i, row in enumerate(data["rows"]):
+        where = f"{path}: rows[{i}]"
+        if not isinstance(row, dict) or set(row) - ROW_KEYS or not {"name", "study"} <= set(row):
+            raise ValueError(f"{where}: a table of {sorted(ROW_KEYS)} with name and study")
+        study = (path.parent / row["study"]).resolve()
+        if not study.is_file():
+            raise ValueError(f"{where}.study = {row['study']!r}: no such file ({study})")
+        flags = row.get("flags", [])
+        if not all(isinstance(f, str) for f in flags):
+            raise ValueError(f"{where}.flags = {flags!r}: must be a list of strings")
+        rows.append(Row(row["name"], str(study), tuple(flags), row.get("why", "")))
+    names = [r.name for r in rows]
+    if len(set(names)) < len(names):
+        raise ValueError(f"{path}: rows: a name used twice in {names}")
+    return Spec(path, (path.parent / data["out"]).resolve(), data["seeds"], data["iterations"],
+                tuple(data["task_sets"]), tuple(rows))
+
+
+def choices(spec: Spec, row: Row) -> Choices:
+    """The row's training: its flags after the file's --seeds and --iterations."""
+    flags = ["--seeds", str(spec.seeds), "--iterations", str(spec.iterations), *row.flags]
+    try:
+        args = train_parser("train").parse_args(flags)
+    except SystemExit:
+        raise ValueError(f"{spec.path}: row {row.name!r}: bad flags {list(row.flags)}") from None
+    names = {f.name for f in dataclasses.fields(Choices)}
+    chosen = {k: v for k, v in vars(args).items() if k in names}
+    return Choices(**{**chosen, "shaping": shaping(args.shaping)})
+
+
+def run_row(spec: Spec, row: Row, train: bool, studies: dict) -> dict | None:
+    """{task set: {"seeds": [scores per seed], "uvls": scores of UVLS}} of the row, training it
+    first if `train`; None if it is not trained (and `train` is off). `studies` caches a
+    `Runs` per study file."""
+    if row.study not in studies:
+        studies[row.study] = Runs(row.study, spec.out / Path(row.study).stem, FULL)
+    runs = studies[row.study]
+    chosen = choices(spec, row)
+    folder = runs.choices_folder(f"pars_{row.name}", chosen)
+    finished = metrics_rows(folder / "metrics.jsonl")
+    if not train and not (finished and finished[-1]["iteration"] >= chosen.iterations):
+        return None
+    runs.trained(folder, chosen)
+    record = {"folder": str(folder.relative_to(spec.out))}
+    for task_set in spec.task_sets:
+        none, uvls = runs.evaluation("none", task_set), runs.evaluation("uvls", task_set)
+        record[task_set] = {
+            "uvls": scores(none, uvls, uvls),
+            "seeds": [scores(none, uvls, runs.evaluation(
+                f"policy:{folder / 'policy' / f'seed{i}'}", task_set))
+                for i in range(spec.seeds)]}
+    return record
+
+
+def table(spec: Spec, results: dict) -> str:
+    """ABLATION.md: one table per task set, a row per configuration (mean over seeds, then
+    the range), the targets each seed meets."""
+    lines = [f"# Ablation ({spec.path.name}): {spec.seeds} seeds per row, "
+             f"{spec.iterations} iterations", "",
+             "Per task set: *need* = tasks no control fails, *ok* = tasks it recovers. "
+             "wins: reward above UVLS's on need tasks; rec.: need tasks recovered (UVLS's in "
+             "brackets); sheds on: ok tasks with >= 1 MW shed; MW: shed per task of the kind. "
+             "Mean over seeds, range in brackets; targets: seeds meeting all three "
+             "(wins >= 95 %, rec. >= UVLS, sheds on <= 5 % of ok).", ""]
+    for task_set in spec.task_sets:
+        first = next((r[task_set] for r in results.values() if r), None)
+        if first is None:
+            continue
+        uv = first["uvls"]
+        lines += [f"## {task_set}: {uv['n_tasks']} tasks, {uv['need']} need shedding "
+                  f"(UVLS recovers {uv['uvls_recovered']}), {uv['ok']} need none", "",
+                  "| row | wins (% of need) | rec. | MW need | sheds on (% of ok) | MW ok | "
+                  "mean reward | targets | why |", "| --- " * 9 + "|"]
+        for row in spec.rows:
+            record = results.get(row.name)
+            if not record:
+                lines.append(f"| {row.name} | not trained | | | | | | | {row.why} |")
+                continue
+            seeds = record[task_set]["seeds"]
+            cell = lambda key, scale=1.0, fmt="{:.1f}": _cell(  # noqa: E731
+                [s[key] * scale for s in seeds], fmt)
+            need, ok = seeds[0]["need"], seeds[0]["ok"]
+            met = sum(all(targets_met(s).values()) for s in seeds)
+            lines.append(
+                f"| {row.name} | {cell('wins', 100 / max(need, 1))} | "
+                f"{cell('recovered', fmt='{:.1f}')} ({seeds[0]['uvls_recovered']}) | "
+                f"{cell('mw_need', fmt='{:.0f}')} | {cell('sheds_on', 100 / max(ok, 1))} | "
+                f"{cell('mw_ok', fmt='{:.0f}')} | {cell('mean_reward', fmt='{:.0f}')} | "
+                f"{met}/{len(seeds)} | {row.why} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _cell(values: list[float], fmt: str) -> str:
+    low, high = min(values), max(values)
+    return f"{fmt.format(np.mean(values))} [{fmt.format(low)}, {fmt.format(high)}]"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m experiments.ablation",
+                                description=__doc__.split("\n")[0])
+    p.add_argument("spec", help="the ablation file (TOML)")
+    p.add_argument("--only", nargs="+", help="rows to run (default: all, in order)")
+    p.add_argument("--no-train", action="store_true",
+                   help="tabulate the rows already trained; train nothing")
+    args = p.parse_args(argv)
+    try:
+        spec = read_spec(args.spec)
+        unknown = sorted(set(args.only or ()) - {r.name for r in spec.rows})
+        if unknown:
+            raise ValueError(f"--only {unknown}: not rows of {spec.path}")
+        spec.out.mkdir(parents=True, exist_ok=True)
+        results_path = spec.out / "ablation.json"
+        results = json.loads(results_path.read_text()) if results_path.is_file() else {}
+        studies: dict = {}
+        for row in spec.rows:
+            if args.only and row.name not in args.only:
+                continue
+            record = run_row(spec, row, not args.no_train, studies)
+            if record:
+                results[row.name] = {**record, "study": row.study, "flags": list(row.flags)}
+                results_path.write_text(json.dumps(results, indent=1))
+        (spec.out / "ABLATION.md").write_text(table(spec, results))
+        print(f"{spec.out / 'ABLATION.md'}: {len(results)} of {len(spec.rows)} rows")
+    except (ValueError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
