@@ -25,6 +25,7 @@ against such files without GridPACK (what the tests do).
 --motors keeps only some ACMTBLU1 motors, --motor-cons changes their CONs and --add-records
 adds DYR records (another motor model, e.g. CIM6BL) in place of the ACMTBLU1 of their bus
 and load id, in both simulators' files (model-level checks; `gridpack_dyr.MotorEdit`).
+--exciter-source FILE:BUS puts that file's exciter at BUS in place of every exciter.
 --cmld-source FILE:BUS --cmld-at BUS:ID places the composite load of another DYR at BUS (a
 CMLDBLU1 record, replacing the ACMTBLU1 of BUS and ID), --cmld-cons changes every composite
 load's CONs. A composite load needs GridPACK with `gridpack_patches/cmld.patch` (README
@@ -90,6 +91,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="place --cmld-source's composite load there, as CMLDBLU1")
     p.add_argument("--cmld-cons", nargs="+", default=[], metavar="NAME=VALUE",
                    help="set CONs of every composite load, e.g. fel=0 fb=0 vtr1a=0")
+    p.add_argument("--exciter-source", default="", metavar="FILE:BUS",
+                   help="replace every exciter by that file's exciter at BUS (GridPACK's "
+                        "ESST1A aborts on its own 300-bus case)")
     p.add_argument("--motorw", choices=MOTORW, default="gridpack",
                    help="GridPACK's composite motors A-C as published or with the WECC "
                         "switches of gridpack_patches/cmld.patch")
@@ -133,7 +137,7 @@ def _pairs(texts, flag: str, number: bool = True) -> tuple:
 def _edit(args) -> MotorEdit:
     return MotorEdit(tuple(args.motors), _pairs(args.motor_cons, "--motor-cons"),
                      tuple(args.add_records), args.cmld_source, tuple(args.cmld_at),
-                     _pairs(args.cmld_cons, "--cmld-cons"))
+                     _pairs(args.cmld_cons, "--cmld-cons"), args.exciter_source)
 
 
 def _composite(args) -> tuple:

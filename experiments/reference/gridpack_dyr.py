@@ -24,6 +24,7 @@ from jaxgrid.io.dyr import read_dyr
 from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.models.cmld import Cmldblu1, composite_records
 from jaxgrid.models.cmld_init import internal_buses
+from jaxgrid.models.exciters import EXCITERS
 from jaxgrid.records import DyrRecord
 
 COMPOSITE = ("CMLDBLU2", "CMLDBLU1")
@@ -38,7 +39,9 @@ class MotorEdit:
     motor's load stays a static load. Composite loads: `cmld_source` ("FILE:BUS", a
     CMLDBLU1/2 record of another DYR) is placed, as a CMLDBLU1 record, at each `cmld_at`
     ("BUS:ID", replacing an ACMTBLU1 there), and `cmld_cons` (names as in
-    `jaxgrid.models.cmld_cons`) are set on every composite record."""
+    `jaxgrid.models.cmld_cons`) are set on every composite record. `exciter_source`
+    ("FILE:BUS"): every exciter is replaced by that file's exciter record at BUS (e.g.
+    GridPACK's 300-bus case with the 39-bus EXDC1: GridPACK's ESST1A aborts on it)."""
 
     keep: tuple[int, ...] = ()
     cons: tuple[tuple[str, float], ...] = ()
@@ -46,6 +49,7 @@ class MotorEdit:
     cmld_source: str = ""
     cmld_at: tuple[str, ...] = ()
     cmld_cons: tuple[tuple[str, float], ...] = ()
+    exciter_source: str = ""
 
     @property
     def empty(self) -> bool:
@@ -93,16 +97,16 @@ def cmld_text(record: DyrRecord, bus: int, device_id: str, changes=(),
     return f"{bus}, 'USRLOD', '{device_id}', '{model}', {head}, {body} /"
 
 
-def _source_record(source: str) -> DyrRecord:
-    """The composite record of `source` ("FILE:BUS")."""
+def _source_record(source: str, models, flag: str) -> DyrRecord:
+    """The first record of one of `models` at the bus of `source` ("FILE:BUS")."""
     path, _, bus = source.rpartition(":")
     try:
         records = [r for r in read_dyr(path, strict=False).records
-                   if r.model in COMPOSITE and r.bus == int(bus)]
+                   if r.model in models and r.bus == int(bus)]
     except ValueError:
-        raise ValueError(f"--cmld-source {source!r}: expected FILE:BUS") from None
+        raise ValueError(f"{flag} {source!r}: expected FILE:BUS") from None
     if not records:
-        raise ValueError(f"--cmld-source {source!r}: no CMLDBLU1/2 record at bus {bus}")
+        raise ValueError(f"{flag} {source!r}: no {'/'.join(models)} record at bus {bus}")
     return records[0]
 
 
@@ -110,7 +114,7 @@ def _placed(edit: MotorEdit) -> list[str]:
     """The composite records `edit` places (`cmld_source` at each `cmld_at`), as text."""
     if not edit.cmld_at:
         return []
-    source = _source_record(edit.cmld_source)
+    source = _source_record(edit.cmld_source, COMPOSITE, "--cmld-source")
     out = []
     for at in edit.cmld_at:
         bus, _, device_id = at.partition(":")
@@ -139,6 +143,12 @@ def edited_dyr(dyr: str, edit: MotorEdit, out: Path) -> str:
             cons = _set_cons(r.cons, names, edit.cons, "--motor-cons")
             values = ", ".join(f"{v:g}" for v in (*r.header, *r.icons, *cons))
             kept.append(f"{r.bus}, 'USRLOD', {r.device_id}, 'ACMTBLU1', {values} /")
+    if edit.exciter_source:
+        exciter = _source_record(edit.exciter_source, tuple(EXCITERS), "--exciter-source")
+        values = ", ".join(f"{v:.10g}" for v in exciter.cons)
+        for r in (r for r in data.records if r.model in EXCITERS):
+            drop.update(range(r.line - 1, _record_end(lines, r) + 1))
+            kept.append(f"{r.bus}, '{exciter.model}', '{r.device_id}', {values} /")
     if edit.cmld_cons:  # the file's own composite loads, rewritten with the changes
         for r in (r for r in data.records if r.model in COMPOSITE):
             drop.update(range(r.line - 1, _record_end(lines, r) + 1))
