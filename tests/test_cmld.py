@@ -198,6 +198,32 @@ def test_interpss_reading_without_feeder_compensation_starts_at_rest(tmp_path, s
     assert worst < REST_TOL
 
 
+@pytest.mark.parametrize("reading", ["interpss", "interpss_no_ac"])
+def test_interpss_readings_start_at_rest(tmp_path, reading):
+    """CompositeOptions(reading=...): the record as the RLGC environments' InterPSS reads it
+    (../shared/reference/interpss-cmld.md): LFmD 0.85, motors A-C with speed-squared torque
+    and no UV trips (or, "interpss_no_ac", none), the electronic and static loads one
+    constant-impedance remainder whose Q closes the balance (no Bf); at rest."""
+    model = build(tmp_path, record(CONS), composite=CompositeOptions(reading=reading))
+    p = {k: float(np.asarray(v)[0]) for k, v in model.loads[0].params.items()
+         if np.ndim(v) == 1}
+    assert (p["lfmd"], p["bf"], p["fel"], p["p1e"], p["p1c"], p["p2c"], p["pfrq"]) == (
+        0.85, 0.0, 0.0, 2.0, 1.0, 0.0, 0.0)
+    a_to_c = 0.107 + 0.166 + 0.031
+    if reading == "interpss":
+        assert (p["etrqa"], p["etrqb"], p["vtr1a"], p["vtr2c"]) == (2.0, 2.0, 0.0, 0.0)
+        static = 1.0 - a_to_c - 0.444  # the electronic share in the remainder
+    else:
+        assert p["fma"] == p["fmb"] == p["fmc"] == 0.0
+        static = 1.0 - 0.444
+    assert p["p_st0"] == pytest.approx(static * p["p_l"], rel=1e-12)
+    rates, _, _ = derivatives(model, model.initial, network.fault_view(model.network, 0, 1.0),
+                              0.0)
+    worst = max(float(np.abs(np.asarray(r)).max()) for group in rates for d in group
+                for r in d.values())
+    assert worst < REST_TOL
+
+
 def test_load_report_names_the_initialisation(system):
     report = [n for n in system.notes if "CMLDBLU2 at bus 2" in n and "P_L" in n]
     assert len(report) == 1 and "tap 1.06250" in report[0], report

@@ -243,6 +243,28 @@ def floor_steps(v_load, v_first: np.ndarray, scales: np.ndarray,
     return hi
 
 
+INTERPSS_LFMD = 0.85  # InterPSS's motor-D loading factor: its mapper leaves LFmD unread
+
+
+def interpss_cons(p: dict, no_ac: bool) -> dict:
+    """CON arrays (n,) as the InterPSS of the RLGC environments reads them (../shared/
+    reference/interpss-cmld.md): LFmD 0.85; motors A-C with load torque ∝ ω² and no UV
+    trips; the electronic and static loads one constant-impedance remainder (P and Q ∝ V²,
+    no frequency terms; its Q closes the balance, `initialise` with reading != "wecc");
+    no_ac: motors A-C in that remainder too. Motor D's curves are InterPSS's defaults, which
+    are the PNNL data's values."""
+    q = dict(p, lfmd=np.full_like(p["lfmd"], INTERPSS_LFMD), fel=0.0 * p["fel"],
+             p1e=2.0 + 0.0 * p["p1e"], p1c=1.0 + 0.0 * p["p1c"], p2c=0.0 * p["p2c"],
+             q1e=2.0 + 0.0 * p["q1e"], q1c=1.0 + 0.0 * p["q1c"], q2c=0.0 * p["q2c"],
+             pfrq=0.0 * p["pfrq"], qfrq=0.0 * p["qfrq"])
+    for m in MOTORS:
+        q.update({f"etrq{m}": 2.0 + 0.0 * p[f"etrq{m}"], f"vtr1{m}": 0.0 * p[f"vtr1{m}"],
+                  f"vtr2{m}": 0.0 * p[f"vtr2{m}"]})
+        if no_ac:
+            q[f"fm{m}"] = 0.0 * p[f"fm{m}"]
+    return q
+
+
 def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: float,
                options: CompositeOptions, motors: MotorOptions,
                labels: Sequence[str]) -> Initialised:
@@ -253,6 +275,11 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
     """
     p = {k: np.asarray(v, dtype=float) for k, v in p.items()}
     notes: list[str] = []
+    if options.reading != "wecc":
+        p = interpss_cons(p, no_ac=options.reading == "interpss_no_ac")
+        options = dataclasses.replace(options, compensation="static_q")
+        notes.append(f"{len(labels)} composite load(s) read as InterPSS reads them "
+                     f"({options.reading}; cmld_init.interpss_cons)")
     n = s.shape[0]
     sbl = load_base(p, s.real, sbase)
     share = fractions(p)
