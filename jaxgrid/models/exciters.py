@@ -116,7 +116,7 @@ def _saturation_notes(model: type[DeviceModel], p: dict[str, np.ndarray],
         if e1 > e2:
             out.append(f"{label}: saturation points E1 = {e1:g} > E2 = {e2:g}: read in either "
                        "order (PSS/E's two-point formula)")
-        if a[k] >= min(e1, e2):
+        if (s1 > 0 and e1 <= a[k]) or (s2 > 0 and e2 <= a[k]):  # the curve misses a point
             out.append(f"{label}: the saturation curve through ({e1:g}, {s1:g}), ({e2:g}, "
                        f"{s2:g}) has A = {a[k]:.4g} above a point (S·E does not grow with E): "
                        f"read as PSS/E's formula gives it, no saturation below {a[k]:.4g}")

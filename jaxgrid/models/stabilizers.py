@@ -130,10 +130,10 @@ class Ieeest(StabilizerModel):
         if m > n:
             return (f"A5 = {p['a5']:g}, A6 = {p['a6']:g}: the filter numerator's degree {m} "
                     f"exceeds its denominator's {n} (set by A1-A4); not realisable")
-        for lead, lag in (("t1", "t2"), ("t3", "t4")):
-            if p[lag] == 0 and p[lead] != 0:
-                return (f"{lag.upper()} = 0 with {lead.upper()} = {p[lead]:g}: a pure lead "
-                        f"is not realisable; needs {lag.upper()} > 0 or {lead.upper()} = 0")
+        for lead, lag_ in (("t1", "t2"), ("t3", "t4")):
+            if p[lag_] == 0 and p[lead] != 0:
+                return (f"{lag_.upper()} = 0 with {lead.upper()} = {p[lead]:g}: a pure lead "
+                        f"is not realisable; needs {lag_.upper()} > 0 or {lead.upper()} = 0")
         if p["lsmin"] > p["lsmax"]:
             return f"LSMIN = {p['lsmin']:g} > LSMAX = {p['lsmax']:g}"
         return None
