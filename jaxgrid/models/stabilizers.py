@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.models.base import (Array, Con, DeviceModel, Initial, ModelError, Params,
-                                 Signals, StartPoint, States, device_label, lag,
+                                 Sentinel, Signals, StartPoint, States, device_label, lag,
                                  lead_lag_output, safe)
 
 FILTER_ORDER = 4  # filter states per unit, the denominator's largest degree
@@ -103,7 +103,9 @@ class Ieeest(StabilizerModel):
             Con("lsmax", "p.u.", "output upper limit"),
             Con("lsmin", "p.u.", "output lower limit"),
             Con("vcu", "p.u.", "output cut-out above this terminal voltage (0: none)", 0.0),
-            Con("vcl", "p.u.", "output cut-out below this terminal voltage (0: none)", 0.0))
+            Con("vcl", "p.u.", "output cut-out below this terminal voltage (0: none)", 0.0,
+                sentinel=Sentinel("the output is never cut out (Ec > VCL always)",
+                                  lower=True)))
     states = ("f1", "f2", "f3", "f4", "x_ll1", "x_ll2", "x_wo")
 
     @classmethod
