@@ -3,7 +3,8 @@
 Order of one evaluation (spec §0 initialisation order, run forwards):
 machine EMFs -> Norton sources -> network (with fault, static loads and load models, all
 scaled by the connected fraction) -> machine currents (`Signals`) -> one loop over the
-device families: exciters (EFD) -> governors (Pm) -> machine and load-model derivatives.
+device families: governors (Pm) -> stabilizers (VOTHSG) -> exciters (EFD) -> machine and
+load-model derivatives.
 Once per accepted step `update_loads` advances the load models' discrete logic.
 """
 from __future__ import annotations
@@ -22,10 +23,12 @@ from jaxgrid.vecmath import sincos
 
 ROS2_GAMMA = 1.0 + 1.0 / math.sqrt(2.0)  # ROS2's γ: L-stable, second order for any J
 PHI_SERIES_BELOW = 0.5  # |λ·dt| below which φ1, φ2 come from their Taylor series
-FAMILIES = ("machines", "exciters", "governors", "loads")  # GridModel/GridState fields
-# Evaluation order: each family reads what the earlier ones wrote (exciters EFD, governors
-# Pm, both read by the machines)
-CAUSAL_ORDER = ("exciters", "governors", "machines", "loads")
+# GridModel/GridState fields, in the order of GridState.integrated()
+FAMILIES = ("machines", "exciters", "governors", "loads", "stabilizers")
+# Evaluation order: each family reads what the earlier ones wrote (governors Pm, read by a
+# stabilizer of accelerating power and by the machines; stabilizers VOTHSG, read by the
+# exciters; exciters EFD, read by the machines)
+CAUSAL_ORDER = ("governors", "stabilizers", "exciters", "machines", "loads")
 
 
 def _index(group):
@@ -76,7 +79,8 @@ def solve_network(model: GridModel, x: GridState, fault: network.Fault, active,
 
 def machine_signals(model: GridModel, x: GridState, v, emf) -> Signals:
     """The model-wide `Signals` at slot voltages v (n_slot,) and EMFs emf (n_gen,): the
-    machines' currents and speeds, EFD0 and Pm0 (until exciters and governors set them)."""
+    machines' currents and speeds, EFD0 and Pm0 (until exciters and governors set them),
+    VOTHSG 0 (until stabilizers set it)."""
     vt = v[:model.n_gen]
     current = (emf - vt) / model.z_source
     # (n_gen,) rotor-frame currents, concatenated on purpose: the concatenation is stored,
@@ -90,7 +94,7 @@ def machine_signals(model: GridModel, x: GridState, v, emf) -> Signals:
                               for g, xs in zip(model.machines, x.machines)])
     return Signals(vt=vt, current=current, i_dq=i_dq, xadifd=xadifd, dw=dw,
                    efd=jnp.asarray(model.efd0), pm=jnp.asarray(model.pm0),
-                   v_load=v[model.n_gen:], omega_b=model.omega_b)
+                   vothsg=jnp.zeros_like(dw), v_load=v[model.n_gen:], omega_b=model.omega_b)
 
 
 def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
@@ -103,7 +107,8 @@ def derivatives(model: GridModel, x: GridState, fault: network.Fault, active):
     Args:
       x: current state; fault/active: the task's fault and whether it is on (0/1).
     Returns:
-      (dx, v, residual): dx a tuple (machines, exciters, governors, loads) of {state: rate}
+      (dx, v, residual): dx a tuple (machines, exciters, governors, loads, stabilizers) of
+      {state: rate}
       dicts mirroring x.integrated(); v (n_slot,) the slot voltages; residual the network
       fixed-point residual.
     """
@@ -193,7 +198,7 @@ def _gather(states, pairs):
 
 def _scatter(states, pairs, values):
     """`states` with the stiff pairs set to the parts of `values` (n_stiff,) complex."""
-    machines, exciters, governors, loads = states
+    machines, exciters, governors, loads, *rest = states
     loads = [dict(xs) for xs in loads]
     offset = 0
     for g, (re, im) in pairs:
@@ -201,7 +206,7 @@ def _scatter(states, pairs, values):
         part = values[offset:offset + n]
         loads[g][re], loads[g][im] = jnp.real(part), jnp.imag(part)
         offset += n
-    return machines, exciters, governors, tuple(loads)
+    return machines, exciters, governors, tuple(loads), *rest
 
 
 def exponential_heun(model: GridModel, x: GridState, dt: float, implicit=frozenset()):
@@ -362,13 +367,14 @@ def rosenbrock_heun(model: GridModel, x: GridState, dt: float, jacobian=None):
         out = predict_rest(s0, k1)
         start, k_1 = _gather_blocks(s0[3], blocks), first_stage(k1)
         return (*out[:3], _scatter_blocks(out[3], blocks,
-                                          [s + a for s, a in zip(start, k_1)]))
+                                          [s + a for s, a in zip(start, k_1)]), *out[4:])
 
     def correct(s0, predicted, k1, k2):
         out = correct_rest(s0, predicted, k1, k2)
         start, k_1 = _gather_blocks(s0[3], blocks), first_stage(k1)
         k_2 = solve([dt * r - 2.0 * a for r, a in zip(_gather_blocks(k2[3], blocks), k_1)])
         return (*out[:3], _scatter_blocks(out[3], blocks, [s + 1.5 * a + 0.5 * b
-                                                           for s, a, b in zip(start, k_1, k_2)]))
+                                                           for s, a, b in zip(start, k_1, k_2)]),
+                *out[4:])
 
     return predict, correct

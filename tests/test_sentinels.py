@@ -14,10 +14,12 @@ from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.models.base import SENTINELS
 from jaxgrid.models.cmld import Cmldblu2
 from jaxgrid.models.cmld_cons import MOTOR_D_CONS, MOTORS
+from jaxgrid.models.stabilizers import Ieeest
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "models.md"
 ROWS = {"ACMTBLU1, CMLD motor D": Acmtblu1.cons,
-        "CMLDBLU1/2 motors A, B, C": tuple(c for c in Cmldblu2.cons if c not in MOTOR_D_CONS)}
+        "CMLDBLU1/2 motors A, B, C": tuple(c for c in Cmldblu2.cons if c not in MOTOR_D_CONS),
+        "IEEEST": Ieeest.cons}
 
 
 def docs_table() -> dict[str, set[str]]:
@@ -45,11 +47,12 @@ def test_docs_table_is_the_declarations():
 @pytest.mark.parametrize("con", [c for cons in ROWS.values() for c in cons if c.sentinel],
                          ids=lambda c: c.name)
 def test_declared_sentinels_pass_the_range_check_and_nothing_else_does(con):
-    """Every declared CON accepts 999 and 9999 (a note only where they lie outside its range);
-    a value outside its range that is no sentinel still fails with the range."""
-    for value in SENTINELS:
+    """Every declared CON accepts 999 and 9999 (their negatives for a lower limit; a note only
+    where they lie outside its range); a value outside its range that is no sentinel still
+    fails with the range."""
+    for value in con.sentinel.values:
         assert con.check(value) is None, f"{con.name} = {value:g}"
         outside = not con.lo <= value <= con.hi
         assert (con.sentinel_meaning(value) == con.sentinel.meaning) == outside
-    not_a_sentinel = 10 * con.hi + 1
+    not_a_sentinel = con.lo - 1 if con.sentinel.lower else 10 * con.hi + 1
     assert con.check(not_a_sentinel) == f"must lie in [{con.lo}, {con.hi}]"
