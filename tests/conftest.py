@@ -79,3 +79,17 @@ def shared_cases() -> Path:
     """../shared/cases, the PNNL reference inputs (read in place, never copied)."""
     assert SHARED_CASES.is_dir(), f"reference cases not found at {SHARED_CASES}"
     return SHARED_CASES
+
+
+# The files that take longest (measured with --durations), longest first: `make test` hands
+# whole files to its two workers in collection order (--dist loadfile
+# --no-loadscope-reorder), so these start first and no long file starts last.
+LONGEST_FIRST = ("test_reproduce.py", "test_train.py", "test_study.py", "test_cmld.py",
+                 "test_env.py", "test_mpc.py", "test_simulate.py", "test_ppo.py",
+                 "test_step_accuracy.py", "test_gridpack_reference.py", "test_notebook.py")
+
+
+def pytest_collection_modifyitems(items):
+    """Items of the LONGEST_FIRST files first, in that order; the rest as collected."""
+    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
