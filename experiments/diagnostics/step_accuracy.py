@@ -57,14 +57,17 @@ STRESS_SHARE = 0.15  # share of the action buses that shed at each agent step un
 
 def run(study: Study, dt: float, episode: float, tasks: str, coarse_dt: float | None = None,
         fine_window: float = 1.0, coarse_sweeps: int | None = None,
-        motor_step: str = "exponential"):
+        motor_step: str = "exponential", timed: bool = True):
     """(vm (n_task, n_steps, n_observed), recovered (n_task,), warm wall time s) without
-    control at step dt (coarse_dt outside the fault window, None: dt throughout)."""
+    control at step dt (coarse_dt outside the fault window, None: dt throughout); with
+    `timed` False the episodes run once (no warm run) and the time is None."""
     env = study.env(dt=dt, episode=episode, coarse_dt=coarse_dt, fine_window=fine_window,
                     coarse_sweeps=coarse_sweeps, motor_step=motor_step)
     apply, params, carry = no_control(env)
     specs = study.tasks(tasks)
-    rollout_specs(study, env, apply, params, specs, carry, trace=True)  # compile
+    _, out = rollout_specs(study, env, apply, params, specs, carry, trace=True)  # compiles
+    if not timed:
+        return out["vm"], out["recovered"], None
     start = time.perf_counter()
     _, out = rollout_specs(study, env, apply, params, specs, carry, trace=True)
     return out["vm"], out["recovered"], time.perf_counter() - start
@@ -121,7 +124,7 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
     episode = episode or study.config.episode
     with summarised_notes():
         reference = rebuild(study, precision=reference_precision, sweeps=reference_sweeps)
-    vm_ref, ok_ref, _ = run(reference, reference_dt, episode, tasks)
+    vm_ref, ok_ref, _ = run(reference, reference_dt, episode, tasks, timed=False)
     check = check_index(study, tasks, study.config.agent_dt, vm_ref.shape[1])
     rows = []
     for n_sweeps in sweeps:
