@@ -13,8 +13,8 @@ install:  ## create .venv and install the project with its test extras
 run:  ## the main job on the built-in default case: PARS training on the 39-bus FIDVR study
 	XLA_FLAGS=--xla_force_host_platform_device_count=2 $(PY) -m experiments.train_39bus --out runs/ieee39
 
-test:  ## the test suite: test files shared by 2 workers, 2 simulated CPU devices each (tests/conftest.py)
-	$(PY) -m pytest -q -n 2 --dist loadfile
+test:  ## the test suite: test files shared by 2 workers, longest first, 2 simulated CPU devices each (tests/conftest.py)
+	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder
 
 bench:  ## benchmarks; figures go to benchmarks/cpu/*.json (GPU records: benchmarks/h100/, h200/)
 	$(PY) -m experiments.bench.powerflow --out benchmarks/cpu/powerflow.json

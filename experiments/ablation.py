@@ -206,6 +206,7 @@ def main(argv=None) -> int:
             if record:
                 results[row.name] = {**record, "study": row.study, "flags": list(row.flags)}
                 results_path.write_text(json.dumps(results, indent=1))
+                (spec.out / "ABLATION.md").write_text(table(spec, results))
         (spec.out / "ABLATION.md").write_text(table(spec, results))
         print(f"{spec.out / 'ABLATION.md'}: {len(results)} of {len(spec.rows)} rows")
     except (ValueError, OSError) as err:

@@ -25,7 +25,7 @@ from jaxgrid.powerflow import PowerFlowError, PowerFlowOptions, solve
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m experiments.powerflow", description=__doc__.split("\n")[0])
     source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument("--raw", help="PSS/E RAW file (v23, v30-v33)")
+    source.add_argument("--raw", help="PSS/E RAW file (v23, v30-v35)")
     source.add_argument("--case", help="built-in case name (see jaxgrid.cases.names())")
     parser.add_argument("--flat", action="store_true", help="flat start instead of stored voltages")
     parser.add_argument("--no-q-limits", action="store_true", help="do not switch PV buses to PQ")

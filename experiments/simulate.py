@@ -25,7 +25,7 @@ from jaxgrid.simulate import FaultEvent, Trajectory, simulate
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m experiments.simulate", description=__doc__.split("\n")[0])
-    p.add_argument("--raw", required=True, help="PSS/E RAW file (v23, v30-v33)")
+    p.add_argument("--raw", required=True, help="PSS/E RAW file (v23, v30-v35)")
     p.add_argument("--dyr", required=True, help="PSS/E DYR file")
     p.add_argument("--fault-bus", type=int, help="RAW number of the faulted bus (none: flat run)")
     p.add_argument("--fault-start", type=float, default=1.0, help="s (default 1.0)")

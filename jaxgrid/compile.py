@@ -34,12 +34,13 @@ from jaxgrid.models.induction import INDUCTION_MOTORS
 from jaxgrid.models.loads import LoadSplit, split_bus_loads
 from jaxgrid.models.machines import MACHINES
 from jaxgrid.models.options import CompositeOptions, MotorOptions
+from jaxgrid.models.stabilizers import STABILIZERS
 from jaxgrid.powerflow import PowerFlowResult, admittance_matrix, bus_loads, solve
 from jaxgrid.records import DyrData, DyrRecord
 
 LOAD_MODELS = {**LOAD_MOTORS, **INDUCTION_MOTORS}
-SUPPORTED = (tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS) + tuple(LOAD_MODELS)
-             + tuple(COMPOSITE_LOADS))
+SUPPORTED = (tuple(MACHINES) + tuple(EXCITERS) + tuple(GOVERNORS) + tuple(STABILIZERS)
+             + tuple(LOAD_MODELS) + tuple(COMPOSITE_LOADS))
 
 # What replaces a model that is not supported, by kind (lenient mode).
 _FALLBACK = {
@@ -84,9 +85,10 @@ class CompileOptions:
     """How a case becomes a `GridModel`.
 
     Attributes:
-      strict: unsupported DYR models (or a generator without a machine model) raise a
-        DyrError listing all of them; otherwise they are dropped with one warning that
-        says what replaces each.
+      strict: unsupported DYR models (or a generator with dynamic records but no machine
+        model) raise a DyrError listing all of them; otherwise they are dropped with one
+        warning that says what replaces each. A generator the DYR data do not mention is a
+        constant-admittance negative load either way (noted).
       loads: ZIP split of static loads during dynamics (default: constant admittance).
       load_buses: RAW bus numbers whose load can be changed (load shedding); None: every
         bus with an in-service load. Buses with a load model always get a slot.
@@ -130,15 +132,20 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     pf = solve(case) if pf is None else pf
     notes: list[str] = []
     records = _classify(dyr, case, options.strict, notes)
+    notes.extend(_sentinel_notes(records))
     keys, load_keys = _unit_keys(case)
-    machines = _machine_groups(case, records["machine"], keys, options.strict, notes)
+    machines = _machine_groups(case, records["machine"], keys, options.strict, notes,
+                               {_key(r) for rs in records.values() for r in rs})
     order = np.array([u for g in machines for u in g.units], dtype=int)
     position = {int(g): k for k, g in enumerate(order)}
     pending = {"machines": machines,
                "exciters": _controller_groups(case, records["exciter"], EXCITERS, keys, position),
                "governors": _controller_groups(case, records["governor"], GOVERNORS, keys,
                                                position),
-               "loads": _load_groups(records["load"], load_keys, options.composite)}
+               "loads": _load_groups(records["load"], load_keys, options.composite),
+               "stabilizers": _controller_groups(case, records["stabilizer"], STABILIZERS,
+                                                 keys, position)}
+    _note_idle_stabilizers(pending, notes)
 
     gen = case.generators
     sbase = case.base_mva
@@ -146,10 +153,12 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     vt0 = (pf.vm * np.exp(1j * pf.va))[gen.bus[order]]
     i0 = np.conj((pf.pg[order] + 1j * pf.qg[order]) / ratio / vt0)  # machine base
     bus_p = _bus_load_at(_without_composite(case, pending["loads"]), pf).real
-    started, point = _start(pending, _start_point(case, pf, vt0, i0, bus_p, options))
+    started, point = _start(pending, _start_point(case, pf, vt0, i0, bus_p, ratio * sbase,
+                                                  options))
     machines, m_states = _device_groups(started["machines"])
     exciters, e_states = _device_groups(started["exciters"])
     governors, g_states = _device_groups(started["governors"])
+    stabilizers, s_states = _device_groups(started["stabilizers"])
     efd0, pm0 = (np.asarray(a) for a in (point.signals.efd, point.signals.pm))
 
     case, pf, loads, names, upstream = _expand(case, pf, records["load"], started["loads"],
@@ -178,16 +187,17 @@ def compile_model(case: Case, dyr: DyrData, options: CompileOptions = CompileOpt
     load_groups = tuple(
         DeviceGroup(params=m.params, model=m.model, index=tuple(slot_of[int(b)] for b in m.buses),
                     labels=m.labels) for m in motors)
-    _report_model_notes(case, machines + exciters + governors + load_groups, notes)
+    _report_model_notes(case, machines + exciters + governors + stabilizers + load_groups, notes)
 
     model = GridModel(
         machines=machines, exciters=exciters, governors=governors, loads=load_groups,
+        stabilizers=stabilizers,
         network=network.build(y, slot_bus, np.complex128),
         z_source=z_source, y_norton=y_norton, mbase_ratio=ratio, efd0=efd0, pm0=pm0,
         load_y=y_z[load_bus], load_s_i=s_i[load_bus], load_s_p=s_p[load_bus],
         load_vm0=np.maximum(pf.vm[load_bus], 1e-6), load_p0=s_load[load_bus].real, v0=v0,
         initial=GridState(machines=m_states, exciters=e_states, governors=g_states,
-                          loads=tuple(m.states for m in motors),
+                          stabilizers=s_states, loads=tuple(m.states for m in motors),
                           load_flags=tuple(m.flags for m in motors),
                           load_left=np.ones(len(load_bus)), v=v0[slot_bus]),
         bus_numbers=tuple(int(b) for b in case.buses.number),
@@ -249,35 +259,41 @@ def _kind(name: str) -> str:
 
 
 def _classify(dyr: DyrData, case: Case, strict: bool, notes: list[str]) -> dict[str, list]:
-    """Supported records by kind. Unsupported ones, and records naming a generator the case
-    does not have, raise (strict) or warn; those of out-of-service generators are noted."""
+    """Supported records by kind. Unsupported ones, and records naming a generator or load
+    record the case does not have (or has out of service: loads), raise (strict, listing all)
+    or are dropped with a warning; those of out-of-service generators are noted."""
     keys, load_keys = _unit_keys(case)
     every_generator = {(int(case.buses.number[b]), str(g).strip().upper())
                        for b, g in zip(case.generators.bus, case.generators.gen_id)}
-    out: dict[str, list[DyrRecord]] = {"machine": [], "exciter": [], "governor": [], "load": []}
+    out: dict[str, list[DyrRecord]] = {"machine": [], "exciter": [], "governor": [],
+                                       "stabilizer": [], "load": []}
     unsupported: dict[str, list[DyrRecord]] = {}
-    orphans: list[DyrRecord] = []
+    orphans: dict[str, list[DyrRecord]] = {"generator": [], "load": []}
     for r in dyr.records:
         kind = "load" if r.record_type == "USRLOD" else _kind(r.model)
         if r.model not in SUPPORTED:
             unsupported.setdefault(r.model, []).append(r)
         elif kind == "load" and _key(r) not in load_keys:
-            raise ModelError(f"{r.source}:{r.line}: {r.model} at bus {r.bus} id "
-                             f"'{r.device_id}': the case has no in-service load record "
-                             f"(bus {r.bus}, LID '{r.device_id}')")
+            orphans["load"].append(r)
         elif kind != "load" and _key(r) not in every_generator:
-            orphans.append(r)
+            orphans["generator"].append(r)
         elif kind != "load" and _key(r) not in keys:
             notes.append(f"{device_label(r)}: its generator is out of service; ignored")
         else:
             out[kind].append(r)
-    if orphans:
-        listing = "; ".join(device_label(r) for r in orphans[:10]) + (
-            f"; and {len(orphans) - 10} more" if len(orphans) > 10 else "")
-        message = (f"{len(orphans)} dynamic record(s) name a generator (bus, ID) that the "
-                   f"case {case.source} does not have: {listing}")
-        if strict:
-            raise ModelError(message + " (CompileOptions(strict=False) drops them)")
+    messages = []
+    for what, rs in orphans.items():
+        if rs:
+            listing = "; ".join(device_label(r) + (
+                f": no in-service load record (bus {r.bus}, LID '{r.device_id}')"
+                if what == "load" else "") for r in rs[:10]) + (
+                f"; and {len(rs) - 10} more" if len(rs) > 10 else "")
+            messages.append(f"{len(rs)} dynamic record(s) name a {what} (bus, ID) that the "
+                            f"case {case.source} does not have"
+                            f"{' in service' if what == 'load' else ''}: {listing}")
+    if messages and strict:
+        raise ModelError("; ".join(messages) + " (CompileOptions(strict=False) drops them)")
+    for message in messages:
         warnings.warn(message + "; dropped", ModelWarning, stacklevel=3)
         notes.append(message + "; dropped")
     if unsupported:
@@ -292,6 +308,16 @@ def _classify(dyr: DyrData, case: Case, strict: bool, notes: list[str]) -> dict[
         warnings.warn(message, ModelWarning, stacklevel=3)
         notes.append(message)
     return {kind: _without_repeats(rs, kind, notes) for kind, rs in out.items()}
+
+
+def _sentinel_notes(records: dict[str, list[DyrRecord]]) -> list[str]:
+    """The build notes of CON values read as WECC/PSS/E sentinels (`Con.sentinel_meaning`),
+    model by model."""
+    every = [r for rs in records.values() for r in rs]
+    models = {**MACHINES, **EXCITERS, **GOVERNORS, **STABILIZERS, **LOAD_MODELS,
+              **COMPOSITE_LOADS}
+    return [note for name, model in models.items()
+            for note in model.sentinel_notes([r for r in every if r.model == name])]
 
 
 def _without_repeats(records: list[DyrRecord], kind: str, notes: list[str]) -> list[DyrRecord]:
@@ -400,18 +426,31 @@ def machine_bases(case: Case, pf: PowerFlowResult, machines: list[Pending], orde
     return np.where(raised, MBASE_MARGIN * loading, mbase)
 
 
-def _machine_groups(case, records, keys, strict, notes) -> list[Pending]:
+def _machine_groups(case, records, keys, strict, notes, described) -> list[Pending]:
     """Machine groups in MACHINES order, CON params with ra, xs, zx; index = position in
-    that order."""
+    that order.
+
+    An in-service generator without a machine model becomes a constant-admittance negative
+    load (`_unmodelled_admittance`), noted. Strict mode allows it only where the DYR data
+    have no record of it at all (`described`: (bus, ID) of every record read), as
+    ACTIVSg2000's files leave their 98 renewable units; one with other records (an
+    exciter, a governor) but no machine model is a ModelError."""
     gen = case.generators
     missing = sorted(set(keys.values()) - {keys[_key(r)] for r in records})
     if missing:
-        names = ", ".join(f"bus {case.buses.number[gen.bus[u]]} id '{gen.gen_id[u].strip()}'"
-                          for u in missing[:10])
-        message = f"{len(missing)} in-service generator(s) without a machine model: {names}"
-        if strict:
-            raise ModelError(f"{case.source}: {message}")
-        notes.append(message + "; " + _FALLBACK["machine"])
+        def listing(units):
+            return ", ".join(f"bus {case.buses.number[gen.bus[u]]} id "
+                             f"'{gen.gen_id[u].strip()}'" for u in units[:10]) + (
+                                 f", and {len(units) - 10} more" if len(units) > 10 else "")
+
+        unit_key = {u: k for k, u in keys.items()}
+        partial = [u for u in missing if unit_key[u] in described]
+        if strict and partial:
+            raise ModelError(f"{case.source}: {len(partial)} in-service generator(s) with "
+                             f"dynamic records but no machine model: {listing(partial)}")
+        mw = float(np.sum(gen.pg[missing])) * case.base_mva
+        notes.append(f"{len(missing)} in-service generator(s), {mw:.1f} MW, without a machine "
+                     f"model: {listing(missing)}; " + _FALLBACK["machine"])
     groups = []
     for name, model in MACHINES.items():
         rs = [r for r in records if r.model == name]
@@ -479,9 +518,10 @@ def _without_composite(case: Case, groups: list[Pending]) -> Case:
                                                                in_service=in_service))
 
 
-def _start_point(case, pf, vt0, i0, bus_p, options) -> StartPoint:
+def _start_point(case, pf, vt0, i0, bus_p, mbase, options) -> StartPoint:
     """The power-flow point: machine terminal voltages vt0 and currents i0 (n_gen,) complex
-    (MBASE), every load record's site; bus_p (n_bus,) the load drawn at each bus, p.u."""
+    (MBASE), every load record's site; bus_p (n_bus,) the load drawn at each bus, p.u.;
+    mbase (n_gen,) the machines' MBASE, MVA."""
     loads = case.loads
     vm = pf.vm[loads.bus]
     record_s = (loads.p_power + 1j * loads.q_power
@@ -494,17 +534,17 @@ def _start_point(case, pf, vt0, i0, bus_p, options) -> StartPoint:
         zero = jnp.zeros(len(vt0))
         signals = Signals(vt=jnp.asarray(vt0), current=jnp.asarray(i0),
                           i_dq=jnp.zeros(len(vt0), complex), xadifd=zero, dw=zero, efd=zero,
-                          pm=zero, v_load=jnp.zeros(0, complex),
+                          pm=zero, vothsg=zero, v_load=jnp.zeros(0, complex),
                           omega_b=float(2 * np.pi * case.frequency_hz))
-    return StartPoint(signals=signals, site=site)
+    return StartPoint(signals=signals, site=site, mbase=np.asarray(mbase, dtype=float))
 
 
 def _start(pending: dict[str, list[Pending]],
            point: StartPoint) -> tuple[dict[str, list[tuple[Pending, Initial]]], StartPoint]:
     """Every family's groups initialised (float64) in FAMILIES order, machines -> exciters
-    -> governors -> loads (spec §0): each group reads its init ports from the point, and the
-    `Signals` fields in its output (the machines' EFD0, Pm0, XadIfd0) are written back for
-    the families after it. Returns {family: [(group, Initial)]} and the final point."""
+    -> governors -> loads -> stabilizers (spec §0): each group reads its init ports from the
+    point, and the `Signals` fields in its output (the machines' EFD0, Pm0, XadIfd0) are
+    written back for the families after it. Returns {family: [(group, Initial)]} and the final point."""
     started = {}
     with jax.enable_x64(True):
         for family in FAMILIES:
@@ -537,8 +577,16 @@ def _expand(case, pf, records, started, composite: CompositeOptions, notes):
     return case, pf, started, {}, np.zeros(0, dtype=int)
 
 
+def _note_idle_stabilizers(pending: dict[str, list[Pending]], notes: list[str]) -> None:
+    """A note for every stabilizer whose machine has no exciter to take its output."""
+    excited = {u for g in pending["exciters"] for u in g.units}
+    for g in pending["stabilizers"]:
+        notes.extend(f"{label}: its machine has no modelled exciter; the stabilizer's output "
+                     "drives nothing" for u, label in zip(g.units, g.labels) if u not in excited)
+
+
 def _device_groups(started) -> tuple[tuple[DeviceGroup, ...], tuple[dict, ...]]:
-    """(groups, initial states) of started machines, exciters or governors."""
+    """(groups, initial states) of started machines, exciters, governors or stabilizers."""
     return (tuple(DeviceGroup(params=_np(s.params), model=g.model, index=g.index,
                               labels=g.labels) for g, s in started),
             tuple(_np(s.states) for _, s in started))
@@ -631,8 +679,9 @@ def _check_initial_state(model: GridModel, tolerance: float, notes: list[str]) -
                         problems.append(f"{g.labels[u]}: d{name}/dt = {rate[u]:.3g} at t = 0")
                 for name, bad in g.model.init_violations(g.params, x).items():
                     for u in np.flatnonzero(np.asarray(bad)):
-                        problems.append(f"{g.labels[u]}: initial {name} = "
-                                        f"{float(x[name][u]):.4g} is outside its limits")
+                        value = f" = {float(x[name][u]):.4g}" if name in x else ""
+                        problems.append(f"{g.labels[u]}: initial {name}{value} is outside its "
+                                        "limits")
         stepped = update_loads(model, x0.replace(v=v), x0.v, 1e-3)
         for g, before, after in zip(model.loads, x0.load_flags, stepped.load_flags):
             for name in set(before) - set(g.model.relaxing):

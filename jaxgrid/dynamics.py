@@ -3,9 +3,9 @@
 Order of one evaluation (spec §0 initialisation order, run forwards):
 machine EMFs -> Norton sources -> network (with fault, static loads and load models, all
 scaled by the connected fraction) -> machine currents (`Signals`) -> one loop over the
-device families: exciters (EFD) -> governors (Pm) -> machine and load-model derivatives.
-Once per accepted step `update_loads` advances the load models' discrete logic. How a step
-is taken from these rates is `jaxgrid.steppers`'.
+device families: governors (Pm) -> stabilizers (VOTHSG) -> exciters (EFD) -> machine and
+load-model derivatives. Once per accepted step `update_loads` advances the load models'
+discrete logic. How a step is taken from these rates is `jaxgrid.steppers`'.
 """
 from __future__ import annotations
 
@@ -18,10 +18,12 @@ from jaxgrid.grid import GridModel, GridState, Integrated
 from jaxgrid.models import loads
 from jaxgrid.models.base import Signals
 
-FAMILIES = ("machines", "exciters", "governors", "loads")  # GridModel/GridState fields
-# Evaluation order: each family reads what the earlier ones wrote (exciters EFD, governors
-# Pm, both read by the machines)
-CAUSAL_ORDER = ("exciters", "governors", "machines", "loads")
+# GridModel/GridState fields, in the order of `Integrated` (GridState.integrated())
+FAMILIES = ("machines", "exciters", "governors", "loads", "stabilizers")
+# Evaluation order: each family reads what the earlier ones wrote (governors Pm, read by a
+# stabilizer of accelerating power and by the machines; stabilizers VOTHSG, read by the
+# exciters; exciters EFD, read by the machines)
+CAUSAL_ORDER = ("governors", "stabilizers", "exciters", "machines", "loads")
 
 
 def _index(group):
@@ -70,7 +72,8 @@ def solve_network(model: GridModel, x: GridState, fault: network.Fault, active, 
 
 def machine_signals(model: GridModel, x: GridState, v, emf) -> Signals:
     """The model-wide `Signals` at slot voltages v (n_slot,) and EMFs emf (n_gen,): the
-    machines' currents and speeds, EFD0 and Pm0 (until exciters and governors set them)."""
+    machines' currents and speeds, EFD0 and Pm0 (until exciters and governors set them),
+    VOTHSG 0 (until stabilizers set it)."""
     vt = v[:model.n_gen]
     current = (emf - vt) / model.z_source
     # (n_gen,) rotor-frame currents, concatenated on purpose: the concatenation is stored,
@@ -84,7 +87,7 @@ def machine_signals(model: GridModel, x: GridState, v, emf) -> Signals:
                               for g, xs in zip(model.machines, x.machines)])
     return Signals(vt=vt, current=current, i_dq=i_dq, xadifd=xadifd, dw=dw,
                    efd=jnp.asarray(model.efd0), pm=jnp.asarray(model.pm0),
-                   v_load=v[model.n_gen:], omega_b=model.omega_b)
+                   vothsg=jnp.zeros_like(dw), v_load=v[model.n_gen:], omega_b=model.omega_b)
 
 
 def derivatives(model: GridModel, x: GridState, fault: network.Fault, active, sweeps: int):

@@ -24,7 +24,7 @@ class DeviceGroup:
       params: {name: (n_unit,)} CONs (lower-case PSS/E names), derived constants, references.
       model: the model class (static).
       index: (n_unit,) static index of each unit's machine in the model's machine order
-        (machines, exciters, governors) or of its load slot (load models).
+        (machines, exciters, governors, stabilizers) or of its load slot (load models).
       labels: static "MODEL at bus B id 'I'" per unit, for messages.
     """
 
@@ -39,13 +39,15 @@ class Integrated(NamedTuple):
     (n_unit,)} (p.u., rad); also their rates (`jaxgrid.dynamics.derivatives`).
 
     Attributes:
-      machines, exciters, governors, loads: as `GridState`'s fields of those names.
+      machines, exciters, governors, loads, stabilizers: as `GridState`'s fields of those
+        names (`jaxgrid.dynamics.FAMILIES` order).
     """
 
     machines: tuple
     exciters: tuple
     governors: tuple
     loads: tuple
+    stabilizers: tuple
 
 
 @struct.dataclass
@@ -53,8 +55,8 @@ class GridState:
     """The dynamic state of one rollout.
 
     Attributes:
-      machines, exciters, governors, loads: per device group, {state name: (n_unit,)}
-        continuous states (p.u., rad), integrated by Heun.
+      machines, exciters, governors, loads, stabilizers: per device group, {state name:
+        (n_unit,)} continuous states (p.u., rad), integrated by Heun.
       load_flags: per load group, {flag: (n_unit,)} states changed once per step (timers,
         run/stall flags, latches, measured voltage and frequency).
       load_left: (n_load,) fraction of each load slot's initial load still connected
@@ -69,10 +71,12 @@ class GridState:
     load_flags: tuple[dict, ...]
     load_left: np.ndarray
     v: np.ndarray
+    stabilizers: tuple[dict, ...] = ()
 
     def integrated(self) -> Integrated:
         """The Heun-integrated part."""
-        return Integrated(self.machines, self.exciters, self.governors, self.loads)
+        return Integrated(self.machines, self.exciters, self.governors, self.loads,
+                          self.stabilizers)
 
     def with_integrated(self, states: Integrated, v) -> GridState:
         """This state with new integrated parts `states` and slot voltages v."""
@@ -87,7 +91,7 @@ class GridModel:
     Slots: the first n_gen are the machines' buses, then one per entry of `load_bus`.
 
     Attributes:
-      machines, exciters, governors: tuples of DeviceGroup.
+      machines, exciters, governors, stabilizers: tuples of DeviceGroup.
       loads: DeviceGroup per dynamic load model (motors), units indexed by load slot.
       network: impedance views (jaxgrid.network.Network).
       z_source: (n_gen,) complex Norton impedance ra + j·xs, p.u. MBASE.
@@ -139,6 +143,7 @@ class GridModel:
     precision: str = struct.field(pytree_node=False)
     notes: tuple[str, ...] = struct.field(pytree_node=False)
     bus_names: tuple[str, ...] = struct.field(pytree_node=False, default=())
+    stabilizers: tuple[DeviceGroup, ...] = ()
 
     @property
     def n_bus(self) -> int:

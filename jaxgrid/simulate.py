@@ -220,7 +220,7 @@ def parameters_valid(model: GridModel):
         for g in getattr(model, family):
             for con in g.model.cons:
                 v = g.params[con.name]
-                ok.append(jnp.all((v >= con.lo) & (v <= con.hi) & ((v > 0) | (not con.positive))))
+                ok.append(jnp.all(con.admits(v)))
     return jnp.all(jnp.stack(ok))
 
 

@@ -205,6 +205,29 @@ def test_ramp_stall_and_partial_restart(motor):
     assert s[-1] == pytest.approx(float(params["sm"][0]) * expected, rel=1e-6)
 
 
+def test_restart_and_thermal_sentinels(tmp_path):
+    """VRST = 999 and TH1T = 999 (WECC "never"): read as written, each with a build note;
+    after the ramp of test_ramp_stall_and_partial_restart part B stays stalled, and a stall
+    at 1 p.u. for 20 s trips nothing thermally."""
+    cons = list(CONS)
+    names = [c.name for c in Acmtblu1.cons]
+    cons[names.index("vrst")], cons[names.index("th1t")] = 999.0, 9999.0
+    model = build(tmp_path, cons=cons)
+    notes = [n for n in model.notes if "WECC/PSS/E sentinel" in n]
+    assert [n.split(": ", 2)[2] for n in notes] == [
+        "CON(21) VRST = 999 p.u. lies outside [0, 2]: read as the WECC/PSS/E sentinel: part B "
+        "never restarts",
+        "CON(29) TH1T = 9999 p.u. lies outside [-10, 100]: read as the WECC/PSS/E sentinel: "
+        "thermal tripping never starts"], notes
+    params, flags = model.loads[0].params, model.initial.load_flags[0]
+    ramp_down = np.linspace(1.0, 0.3, int(2.0 / DT))
+    trace, _ = drive(params, flags, np.concatenate([ramp_down, ramp_down[::-1],
+                                                    held((1.0, 20.0))]))
+    assert trace["run_a"][-1] == 0.0, "the ramp must stall the motors"
+    assert trace["run_b"][len(ramp_down):].max() == 0.0, "part B restarted"
+    assert trace["fth_a"].min() == 1.0, "thermal trip with TH1T = 9999"
+
+
 def test_thermal_trip_timing(motor):
     params, flags = motor
     trace, _ = drive(params, flags, held((0.0, 0.05), (1.0, 20.0)))

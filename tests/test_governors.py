@@ -22,8 +22,9 @@ import pytest
 from conftest import SHARED_CASES, andes_cases_dir
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.models.base import ModelError
-from jaxgrid.models.governors import (GOVERNORS, WIDEN_MARGIN, Gast, GovernorPorts,
+from jaxgrid.models.governors import (GOVERNORS, WIDEN_MARGIN, Gast, Ggov1, GovernorPorts,
                                       GovernorStart, Hygov, Ieeeg1, Ieesgo, Tgov1, Wsieg1)
+from jaxgrid.records import DyrRecord
 
 IEEE39_DYR = SHARED_CASES / "ieee39" / "IEEE39bus_3AC.dyr"
 GRIDPACK_DYR = SHARED_CASES / "ieee39" / "IEEE39bus_3AC_exdc1_gridpack.dyr"  # WSIEG1
@@ -54,6 +55,18 @@ def records(tmp_path_factory) -> dict[str, dict[str, tuple]]:
     return out
 
 
+def ports(dw) -> GovernorPorts:
+    """Ports at speed deviation dw with the electrical power 0 (read by GGOV1 only)."""
+    dw = jnp.asarray(dw, dtype=float)
+    return GovernorPorts(dw=dw, pe=jnp.zeros_like(dw))
+
+
+def start(pm0) -> GovernorStart:
+    """A start at mechanical power pm0 (p.u.), the same electrical power, MBASE 100 MVA."""
+    pm0 = jnp.asarray(pm0, dtype=float)
+    return GovernorStart(pm=pm0, pe=pm0, mbase=jnp.full_like(pm0, 100.0))
+
+
 def params(model, recs, **changes):
     """Prepared params of `recs` with CONs in `changes` overwritten (scalars or arrays)."""
     p = model.read(recs)
@@ -77,7 +90,7 @@ def simulate(model, p, x, dw, t_end: float, dt: float):
     @jax.jit
     def run(p, x, dw):
         def step(_, x):
-            _, dx = model.rates(p, x, GovernorPorts(dw))
+            _, dx = model.rates(p, x, ports(dw))
             x = {k: v + dt * dx[k] for k, v in x.items()}
             return {k: jnp.clip(v, *limits[k]) if k in limits else v for k, v in x.items()}
         return jax.lax.fori_loop(0, round(t_end / dt), step, x)
@@ -105,11 +118,11 @@ def test_init_is_steady(records, name, source, bypass):
         p = with_bypassed_half(model, p)
     n = len(recs) * (2 if bypass else 1)
     pm0 = jnp.linspace(0.5, 0.8, n)  # inside every unit's limits in these files
-    p, x, *_ = model.init(p, GovernorStart(pm0))
+    p, x, *_ = model.init(p, start(pm0))
     assert set(x) == set(model.states), f"{name}: init states {sorted(x)} != {model.states}"
     bad = {k: np.flatnonzero(v) for k, v in model.init_violations(p, x).items() if np.any(v)}
     assert not bad, f"{name} ({source}): init outside limits {bad}"
-    pm, dx = model.rates(p, x, GovernorPorts(jnp.zeros(n)))
+    pm, dx = model.rates(p, x, ports(jnp.zeros(n)))
     for state, d in dx.items():
         assert float(jnp.max(jnp.abs(d))) < STEADY_TOL, f"{name} ({source}) d{state}/dt = {d}"
     assert float(jnp.max(jnp.abs(pm - pm0))) < STEADY_TOL, f"{name} ({source}): Pm {pm} != {pm0}"
@@ -119,8 +132,8 @@ def test_init_is_steady(records, name, source, bypass):
 def test_dynamics_jit_and_gradient(records, name, source):
     model = GOVERNORS[name]
     p = with_bypassed_half(model, params(model, records[source][name]))
-    p, x, *_ = model.init(p, GovernorStart(jnp.full(len(p[model.cons[0].name]), 0.7)))
-    total_pm = jax.jit(lambda p, x, dw: jnp.sum(model.rates(p, x, GovernorPorts(dw))[0]))
+    p, x, *_ = model.init(p, start(jnp.full(len(p[model.cons[0].name]), 0.7)))
+    total_pm = jax.jit(lambda p, x, dw: jnp.sum(model.rates(p, x, ports(dw))[0]))
     dw = jnp.full(x[model.states[0]].shape, -0.002)
     grads = jax.grad(total_pm, argnums=(0, 1, 2))(p, x, dw)
     for leaf in jax.tree_util.tree_leaves(grads):
@@ -130,17 +143,17 @@ def test_dynamics_jit_and_gradient(records, name, source):
 def test_gast_init_above_at_is_flagged(records):
     # 39-bus GAST: AT = 0.9; VMAX raised to 1.2 so that only the load limit is violated.
     p = params(Gast, records["ieee39"]["GAST"], vmax=1.2)
-    p, x, *_ = Gast.init(p, GovernorStart(jnp.array([0.95])))
+    p, x, *_ = Gast.init(p, start(jnp.array([0.95])))
     flags = {k: bool(v[0]) for k, v in Gast.init_violations(p, x).items()}
     assert flags == {"x1": False, "x3": True}, flags
 
 
 def test_ieeeg1_and_hygov_init_violations(records):
     p = params(Ieeeg1, records["ieee39"]["IEEEG1"][:1])  # PMIN = 0.4, K1 + K3 + K5 + K7 = 1
-    p, x, *_ = Ieeeg1.init(p, GovernorStart(jnp.array([0.3])))
+    p, x, *_ = Ieeeg1.init(p, start(jnp.array([0.3])))
     assert bool(Ieeeg1.init_violations(p, x)["pgv"][0]), "Pgv0 = 0.3 < PMIN = 0.4 not flagged"
     p = params(Hygov, records["activsg"]["HYGOV"][:1])  # GMAX = 1
-    p, x, *_ = Hygov.init(p, GovernorStart(jnp.array([2.0])))  # q0 = 2/At + qNL > 1
+    p, x, *_ = Hygov.init(p, start(jnp.array([2.0])))  # q0 = 2/At + qNL > 1
     assert bool(Hygov.init_violations(p, x)["g"][0]), "g0 > GMAX not flagged"
 
 
@@ -162,9 +175,9 @@ def test_tgov1_droop_settles(records):
     # state x1 = x2 = (Pref − Δω)/R = Pm0 − Δω/R, so Pm = Pm0 − Δω/R − Dt·Δω.
     p = params(Tgov1, records["kundur"]["TGOV1"], dt=0.5)
     pm0, dw = 0.7, 0.001
-    p, x, *_ = Tgov1.init(p, GovernorStart(jnp.full(4, pm0)))
+    p, x, *_ = Tgov1.init(p, start(jnp.full(4, pm0)))
     x = simulate(Tgov1, p, x, dw, t_end=200.0, dt=0.01)  # 28 T3: transient < 1e-12
-    pm, _ = Tgov1.rates(p, x, GovernorPorts(jnp.full(4, dw)))
+    pm, _ = Tgov1.rates(p, x, ports(jnp.full(4, dw)))
     expected = pm0 - dw / 0.05 - 0.5 * dw
     assert np.allclose(pm, expected, rtol=0, atol=SETTLED_TOL), (pm, expected)
 
@@ -173,12 +186,12 @@ def test_tgov1_vmax_is_non_windup(records):
     # Underspeed Δω = −0.05 asks x1 → Pm0 + 1; VMAX = 0.9 stops it exactly there. Back at
     # Δω = 0 the valve leaves VMAX at once (a windup state would stay above it).
     p = params(Tgov1, records["kundur"]["TGOV1"][:1], vmax=0.9)
-    p, x, *_ = Tgov1.init(p, GovernorStart(jnp.array([0.7])))
+    p, x, *_ = Tgov1.init(p, start(jnp.array([0.7])))
     x = simulate(Tgov1, p, x, -0.05, t_end=5.0, dt=0.01)
     assert float(x["x1"][0]) == 0.9, x["x1"]
-    _, dx = Tgov1.rates(p, x, GovernorPorts(jnp.array([-0.05])))
+    _, dx = Tgov1.rates(p, x, ports(jnp.array([-0.05])))
     assert float(dx["x1"][0]) == 0.0, "derivative not frozen at VMAX"
-    _, dx = Tgov1.rates(p, x, GovernorPorts(jnp.array([0.0])))
+    _, dx = Tgov1.rates(p, x, ports(jnp.array([0.0])))
     assert float(dx["x1"][0]) == pytest.approx((0.7 - 0.9) / 0.49), dx["x1"]
 
 
@@ -187,10 +200,10 @@ def test_ieeeg1_valve_rate_limits(records):
     # Valve speed (P0 − K·Δω − Pgv)/T3 = ∓2 p.u./s at the step, clipped to Uc or Uo; it stays
     # clipped while the gap exceeds Uo·T3 = 0.01 (opening) or |Uc|·T3 = 0.05 (closing).
     p = params(Ieeeg1, records["ieee39"]["IEEEG1"][:1])
-    p, x0, *_ = Ieeeg1.init(p, GovernorStart(jnp.array([0.5])))
-    _, dx = Ieeeg1.rates(p, x0, GovernorPorts(jnp.array([-0.01])))
+    p, x0, *_ = Ieeeg1.init(p, start(jnp.array([0.5])))
+    _, dx = Ieeeg1.rates(p, x0, ports(jnp.array([-0.01])))
     assert float(dx["pgv"][0]) == 0.1, "opening rate is not Uo"
-    _, dx = Ieeeg1.rates(p, x0, GovernorPorts(jnp.array([0.01])))
+    _, dx = Ieeeg1.rates(p, x0, ports(jnp.array([0.01])))
     assert float(dx["pgv"][0]) == -0.5, "closing rate is not Uc"
     # Opening: the gap 0.2 shrinks at Uo for 1.9 s, so after 1 s Pgv = 0.5 + Uo·1 exactly.
     x = simulate(Ieeeg1, p, x0, -0.01, t_end=1.0, dt=0.001)
@@ -198,16 +211,16 @@ def test_ieeeg1_valve_rate_limits(records):
     # Closing towards P0 − 0.2 = 0.3 < PMIN: stops exactly at PMIN = 0.4 (after 0.2 s at Uc).
     x = simulate(Ieeeg1, p, x0, 0.01, t_end=1.0, dt=0.001)
     assert float(x["pgv"][0]) == 0.4, x["pgv"]
-    _, dx = Ieeeg1.rates(p, x, GovernorPorts(jnp.array([0.01])))
+    _, dx = Ieeeg1.rates(p, x, ports(jnp.array([0.01])))
     assert float(dx["pgv"][0]) == 0.0, "valve derivative not frozen at PMIN"
 
 
 def test_ieeeg1_bypassed_turbine_follows_valve(records):
     # T4..T7 = 0: every stage passes its input, so Pm = (K1 + K3 + K5 + K7)·Pgv at once.
     p = params(Ieeeg1, records["ieee39"]["IEEEG1"][:1], t4=0, t5=0, t6=0, t7=0)
-    p, x, *_ = Ieeeg1.init(p, GovernorStart(jnp.array([0.6])))
+    p, x, *_ = Ieeeg1.init(p, start(jnp.array([0.6])))
     x = dict(x, pgv=jnp.array([0.65]))
-    pm, dx = Ieeeg1.rates(p, x, GovernorPorts(jnp.array([0.0])))
+    pm, dx = Ieeeg1.rates(p, x, ports(jnp.array([0.0])))
     assert float(pm[0]) == pytest.approx(0.65, abs=1e-15)
     assert all(float(dx[s][0]) == 0.0 for s in ("y4", "y5", "y6", "y7")), dx
 
@@ -216,16 +229,16 @@ def test_ieesgo_static_gain_and_lead(records):
     # 39-bus IEESGO: K1 = 14.3, PMIN = 0.5. Steady state: y5 = K2·y4, y6 = K3·y5, so
     # Pm = y4 = Pgv = P0 − K1·Δω (inside [PMIN, PMAX]).
     p = params(Ieesgo, records["ieee39"]["IEESGO"])
-    p, x, *_ = Ieesgo.init(p, GovernorStart(jnp.full(2, 0.8)))
+    p, x, *_ = Ieesgo.init(p, start(jnp.full(2, 0.8)))
     x = simulate(Ieesgo, p, x, 0.001, t_end=60.0, dt=0.002)  # slowest T5 = 3 s
-    pm, _ = Ieesgo.rates(p, x, GovernorPorts(jnp.full(2, 0.001)))
+    pm, _ = Ieesgo.rates(p, x, ports(jnp.full(2, 0.001)))
     assert np.allclose(pm, 0.8 - 14.3 * 0.001, rtol=0, atol=SETTLED_TOL), pm
     # T1 = 0 with T2 = 1, T3 = 0.5 and no turbine lags: the lead pairs with T3, so a speed
     # step gives K1·(T2/T3)·Δω at once; with T1 = T3 = 0 the filter is the static gain K1.
     p = params(Ieesgo, records["ieee39"]["IEESGO"], t1=0, t2=1.0, t3=[0.5, 0.0],
                t4=0, t5=0, t6=0)
-    p, x, *_ = Ieesgo.init(p, GovernorStart(jnp.full(2, 0.8)))
-    pm, _ = Ieesgo.rates(p, x, GovernorPorts(jnp.full(2, 0.001)))
+    p, x, *_ = Ieesgo.init(p, start(jnp.full(2, 0.8)))
+    pm, _ = Ieesgo.rates(p, x, ports(jnp.full(2, 0.001)))
     assert np.allclose(pm, [0.8 - 14.3 * 2 * 0.001, 0.8 - 14.3 * 0.001], rtol=0, atol=1e-14), pm
 
 
@@ -233,9 +246,9 @@ def test_gast_load_limit(records):
     # 39-bus GAST: R = 0.05, AT = 0.9, KT = 2 (VMAX raised to 1.2). Underspeed Δω = −0.01
     # demands Pm0 + 0.2 = 1.0; the limit AT + KT·(AT − x3) = x3 settles at x3 = AT.
     p = params(Gast, records["ieee39"]["GAST"], vmax=1.2)
-    p, x, *_ = Gast.init(p, GovernorStart(jnp.array([0.8])))
+    p, x, *_ = Gast.init(p, start(jnp.array([0.8])))
     x = simulate(Gast, p, x, -0.01, t_end=60.0, dt=0.002)
-    pm, _ = Gast.rates(p, x, GovernorPorts(jnp.array([-0.01])))
+    pm, _ = Gast.rates(p, x, ports(jnp.array([-0.01])))
     assert float(pm[0]) == pytest.approx(0.9, abs=SETTLED_TOL)
 
 
@@ -245,9 +258,9 @@ def test_hygov_droop_settles(records):
     recs = records["activsg"]["HYGOV"][:3]
     p = params(Hygov, recs, dturb=0.5)
     pm0, dw = 0.6, 0.0005
-    p, x, *_ = Hygov.init(p, GovernorStart(jnp.full(3, pm0)))
+    p, x, *_ = Hygov.init(p, start(jnp.full(3, pm0)))
     x = simulate(Hygov, p, x, dw, t_end=2000.0, dt=0.01)  # slowest mode r·Tr/R ≈ 74 s
-    pm, _ = Hygov.rates(p, x, GovernorPorts(jnp.full(3, dw)))
+    pm, _ = Hygov.rates(p, x, ports(jnp.full(3, dw)))
     g = p["nref"] / p["r"] - dw / p["r"]
     expected = pm0 - p["at"] * dw / p["r"] - 0.5 * dw * g
     assert np.allclose(x["g"], g, rtol=0, atol=SETTLED_TOL), (x["g"], g)
@@ -258,15 +271,15 @@ def test_hygov_velm_and_gate_limits(records):
     # A large filtered error asks the integrator for x1/(r·Tr) >> VELM: it moves at VELM,
     # and not at all once at GMAX.
     p = params(Hygov, records["activsg"]["HYGOV"][:1])
-    p, x, *_ = Hygov.init(p, GovernorStart(jnp.array([0.5])))
-    _, dx = Hygov.rates(p, dict(x, x1=jnp.array([1.0])), GovernorPorts(jnp.array([0.0])))
+    p, x, *_ = Hygov.init(p, start(jnp.array([0.5])))
+    _, dx = Hygov.rates(p, dict(x, x1=jnp.array([1.0])), ports(jnp.array([0.0])))
     assert float(dx["xi"][0]) == float(p["velm"][0]), dx["xi"]
-    _, dx = Hygov.rates(p, dict(x, x1=jnp.array([-1.0])), GovernorPorts(jnp.array([0.0])))
+    _, dx = Hygov.rates(p, dict(x, x1=jnp.array([-1.0])), ports(jnp.array([0.0])))
     assert float(dx["xi"][0]) == -float(p["velm"][0]), dx["xi"]
     at_max = dict(x, x1=jnp.array([1.0]), xi=p["gmax"])
-    _, dx = Hygov.rates(p, at_max, GovernorPorts(jnp.array([0.0])))
+    _, dx = Hygov.rates(p, at_max, ports(jnp.array([0.0])))
     assert float(dx["xi"][0]) == 0.0, "integrator not frozen at GMAX"
-    pm, dx = Hygov.rates(p, dict(x, g=jnp.array([0.0])), GovernorPorts(jnp.array([0.0])))
+    pm, dx = Hygov.rates(p, dict(x, g=jnp.array([0.0])), ports(jnp.array([0.0])))
     assert bool(jnp.isfinite(pm[0]) & jnp.isfinite(dx["q"][0])), "closed gate gives inf/nan"
 
 
@@ -317,7 +330,8 @@ def test_ieeeg1_second_machine_is_rejected(tmp_path):
 
 @pytest.mark.parametrize("model", list(GOVERNORS.values()), ids=list(GOVERNORS))
 def test_con_tables_are_complete(model):
-    counts = {"TGOV1": 7, "IEEEG1": 20, "WSIEG1": 34, "GAST": 9, "IEESGO": 11, "HYGOV": 12}
+    counts = {"TGOV1": 7, "IEEEG1": 20, "WSIEG1": 34, "GAST": 9, "IEESGO": 11, "HYGOV": 12,
+              "GGOV1": 33}
     names = [c.name for c in model.cons]
     assert len(names) == counts[model.name] and len(set(names)) == len(names), names
     assert all(c.unit and c.info for c in model.cons), model.name
@@ -328,9 +342,9 @@ def test_wsieg1_droop_settles(records):
     """PNNL GridPACK 39-bus WSIEG1 (K = 25, T1 = T2 = 0, T3 = 0.1, T4 = 0.3, K1 = 1): a
     speed 0.2 % low opens the valve by K·0.002 p.u., reached as Pm after the T4 lag."""
     p = params(Wsieg1, records["gridpack39"]["WSIEG1"][:1])
-    p, x, *_ = Wsieg1.init(p, GovernorStart(jnp.array([0.6])))
+    p, x, *_ = Wsieg1.init(p, start(jnp.array([0.6])))
     x = simulate(Wsieg1, p, x, -0.002, 10.0, 1e-3)
-    pm, _ = Wsieg1.rates(p, x, GovernorPorts(jnp.full(1, -0.002)))
+    pm, _ = Wsieg1.rates(p, x, ports(jnp.full(1, -0.002)))
     assert float(pm[0]) == pytest.approx(0.6 + 25.0 * 0.002, abs=SETTLED_TOL)
 
 
@@ -339,7 +353,7 @@ def test_wsieg1_limits_widen_at_init_as_gridpack(records):
     PMAX and Uo to the start plus 0.1 p.u., noted; IBLOCK 3 sets zero limits to the start."""
     p = params(Wsieg1, records["gridpack39"]["WSIEG1"][:2], iblock=np.array([0.0, 3.0]),
                pmin=np.array([0.0, 0.0]), pmax=np.array([1.01, 0.0]))
-    p, x, *_ = Wsieg1.init(p, GovernorStart(jnp.array([1.121, 0.6])))
+    p, x, *_ = Wsieg1.init(p, start(jnp.array([1.121, 0.6])))
     assert float(p["pmax"][0]) == pytest.approx(1.121 + WIDEN_MARGIN)
     assert float(p["uo"][0]) == pytest.approx(1.121 + WIDEN_MARGIN)
     assert (float(p["pmin"][1]), float(p["pmax"][1])) == pytest.approx((0.6, 0.6))
@@ -357,3 +371,120 @@ def test_wsieg1_unmodelled_deadband_is_rejected(tmp_path):
     message = read_error(Wsieg1, tmp_path, ",".join(values) + "\n")
     assert re.search(r":1: WSIEG1 at bus 30 .*DB1 != 0: WSIEG1 deadbands and valve-gain table "
                      r"are not modelled", message), message
+
+
+# --------------------------------------------------------------------------- #
+# GGOV1 (its CON order and description: jaxgrid.models.governors.Ggov1)
+# --------------------------------------------------------------------------- #
+
+# Rselect Flag R Tpelec maxerr minerr Kpgov Kigov Kdgov Tdgov Vmax Vmin Tact Kturb Wfnl Tb Tc
+# Teng Tfload Kpload Kiload Ldref Dm Ropen Rclose Kimw Aset Ka Ta Trate db Tsa Tsb Rup Rdown
+GGOV1 = (1, 1, 0.04, 1, 0.05, -0.05, 10, 2, 0, 1, 1, 0.15, 0.5, 1.5, 0.2, 0.1, 0, 0, 3, 2, 0.67,
+         1, 0, 0.1, -0.1, 0, 0.01, 10, 0.1, 0, 0, 4, 5, 99, -99)
+
+
+def ggov1(values=GGOV1, line: int = 1, source: str = "hand.dyr") -> list:
+    return [DyrRecord(model="GGOV1", bus=1, device_id="1", cons=tuple(map(float, values)),
+                      icons=(), header=(), record_type="GGOV1", line=line, source=source)]
+
+
+def ggov1_start(p, pm0, pe0, mbase=100.0):
+    pm0 = jnp.asarray(pm0, dtype=float)
+    return Ggov1.init(p, GovernorStart(pm0, jnp.asarray(pe0, dtype=float),
+                                       jnp.full_like(pm0, mbase)))
+
+
+def test_ggov1_texas_records_start_at_rest(records):
+    recs = records["activsg"]["GGOV1"]
+    assert len(recs) == 367
+    p = params(Ggov1, recs)
+    pm0 = jnp.linspace(0.3, 0.8, len(recs))  # MW / Trate inside (Vmin, Vmax) for all
+    p, x, *_ = ggov1_start(p, pm0, pm0 - 0.002, mbase=np.asarray(p["trate"]))
+    assert not any(np.any(v) for v in Ggov1.init_violations(p, x).values())
+    pm, dx = Ggov1.rates(p, x, GovernorPorts(jnp.zeros(len(recs)), pm0 - 0.002))
+    for state, d in dx.items():
+        assert float(jnp.max(jnp.abs(d))) < STEADY_TOL, f"GGOV1 d{state}/dt = {d}"
+    assert float(jnp.max(jnp.abs(pm - pm0))) < STEADY_TOL
+
+
+def test_ggov1_droop_settles_with_pelec_feedback():
+    """Rselect 1 and Pe following Pm (a machine at constant speed): a speed 0.2 % low
+    settles where the error vanishes, Pref − Δω − R·Pe = 0, Pe = Pe0 + 0.002/R = Pe0 + 0.05,
+    through the PI, the rate-limited actuator and the turbine lag (explicit Euler, 10 ms)."""
+    p = params(Ggov1, ggov1())
+    p, x, *_ = ggov1_start(p, [0.55], [0.55])
+    dt, dw = 0.01, jnp.array([-0.002])
+
+    @jax.jit
+    def run(x):
+        def step(_, carry):
+            x, pe = carry
+            pm, dx = Ggov1.rates(p, x, GovernorPorts(dw, pe))
+            x = {k: v + dt * dx[k] for k, v in x.items()}
+            return {k: jnp.clip(v, *Ggov1.limits(p)[k]) if k in Ggov1.limits(p) else v
+                    for k, v in x.items()}, pm
+        return jax.lax.fori_loop(0, 20_000, step, (x, jnp.array([0.55])))
+
+    _, pm = run(x)
+    assert float(pm[0]) == pytest.approx(0.55 + 0.002 / 0.04, abs=SETTLED_TOL)
+
+
+def test_ggov1_acceleration_limiter_ramps_fsr_down():
+    """The speed error switched off (maxerr = minerr = 0) and Pe held: a speed rising at
+    a = 0.02 p.u./s, above Aset = 0.01, makes fsra = m + Ka·DELT·(Aset − a) the lowest
+    request once the Ta lag has caught the acceleration (to e^(−10) by 1 s), and fsr (its
+    memory m) falls at Ka·(a − Aset) = 0.1 p.u./s, from 0.567 toward Vmin = 0.15 (reached
+    after 4 s); at rest (a = 0) fsra lies Ka·DELT·Aset above fsr."""
+    values = list(GGOV1)
+    values[4:6] = [0.0, 0.0]
+    p = params(Ggov1, ggov1(values))
+    p, x, *_ = ggov1_start(p, [0.55], [0.55])
+    dt, a = 1e-3, 0.02
+
+    @jax.jit
+    def run(x):
+        def step(n, x):
+            dx = Ggov1.rates(p, x, GovernorPorts(jnp.array([a * n * dt]), jnp.array([0.55])))[1]
+            return {k: v + dt * dx[k] for k, v in x.items()}
+        x1 = jax.lax.fori_loop(0, 1000, step, x)
+        return x1, jax.lax.fori_loop(1000, 1500, step, x1)
+
+    x1, x2 = run(x)
+    slope = float(x2["x_fsr"][0] - x1["x_fsr"][0]) / 0.5
+    assert slope == pytest.approx(-10 * (a - 0.01), rel=1e-4)
+
+
+def test_ggov1_initial_stroke_outside_limits_moves_kturb_and_vmin():
+    """GridPACK's rules, Kturb 1: Pmech0 = 0.9 needs a stroke 0.9 + 0.2 = 1.1 > Vmax = 1:
+    Kturb becomes 0.9/(1 − 0.2) = 1.125; Pmech0 = 0 needs 0.2 < Vmin 0.3: Vmin becomes 0.2.
+    Both then start at rest (Pmech0 < Ldref: the load limit is not reached)."""
+    values = list(GGOV1)
+    values[11], values[13] = 0.3, 1.0  # Vmin, Kturb
+    p = params(Ggov1, ggov1(values) * 2)
+    p, x, *_ = ggov1_start(p, [0.9, 0.0], [0.9, 0.0])
+    assert np.asarray(p["kturb"]) == pytest.approx([1.125, 1.0])
+    assert np.asarray(p["vmin"]) == pytest.approx([0.3, 0.2])
+    assert not any(np.any(v) for v in Ggov1.init_violations(p, x).values())
+    _, dx = Ggov1.rates(p, x, GovernorPorts(jnp.zeros(2), jnp.array([0.9, 0.0])))
+    assert max(float(jnp.max(jnp.abs(d))) for d in dx.values()) < STEADY_TOL
+    notes = Ggov1.notes({k: np.asarray(v) for k, v in p.items()}, ("u1", "u2"))
+    assert notes == ["u1: loaded beyond Kturb·(Vmax − Wfnl) at the power flow: its initial "
+                     "stroke put at Vmax: KTURB = 1 set to 1.125 (GridPACK's rule)",
+                     "u2: the initial stroke lies below VMIN: VMIN = 0.3 set to 0.2 "
+                     "(GridPACK's rule)"], notes
+
+
+@pytest.mark.parametrize("changes, pattern", [
+    ({0: -1}, r"ICON Rselect = -1: supported 1 .* -1 and -2 are not modelled"),
+    ({1: 2}, r"ICON Flag = 2: allowed 0 .*, 1"),
+    ({17: 0.5}, r"TENG = 0.5 s: the transport delay is not modelled"),
+    ({6: 0}, r"CON\(5\) KPGOV = 0 p.u.: must be > 0"),
+    ({28: 0}, r"TA = 0 with KA = 10: needs TA > 0 or KA = 0"),
+    ({16: 0.2, 15: 0}, r"TB = 0 with TC = 0.2"),
+])
+def test_ggov1_bad_data_names_the_record(changes, pattern):
+    values = list(GGOV1)
+    for k, v in changes.items():
+        values[k] = v
+    with pytest.raises(ModelError, match=rf"^bad\.dyr:3: GGOV1 at bus 1 id '1': {pattern}"):
+        Ggov1.read(ggov1(values, line=3, source="bad.dyr"))

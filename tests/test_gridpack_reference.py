@@ -17,8 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import SHARED_CASES
-from experiments.reference.comparison import against, worst
-from experiments.reference.gridpack_files import load_reference
+from experiments.reference.comparison import against_saved, worst
 from jaxgrid.compile import CompileOptions, ModelError, compile_model
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
@@ -44,18 +43,8 @@ DYR = SHARED_CASES / "ieee39" / "IEEE39bus_3AC_exdc1_gridpack.dyr"
 def results(tmp_path_factory):
     """[(reference file, comparison dict)] for the committed references but UNTESTED; one
     jaxgrid batch per setup (15-40 s each on 2 cores, mostly compiling)."""
-    groups: dict = {}
-    for path in sorted(REFERENCES.glob("*.npz")):
-        if any(tag in path.name for tag in UNTESTED):
-            continue
-        run, fault, setup = load_reference(path)
-        groups.setdefault(setup, []).append((path.name, fault, run))
-    workdir = tmp_path_factory.mktemp("gridpack")
-    out = []
-    for setup, cases in groups.items():
-        rows = against(setup, [(fault, run) for _, fault, run in cases], workdir, t_end=T_END)
-        out += [(name, row) for (name, _, _), (row, _) in zip(cases, rows)]
-    return out
+    paths = [p for p in REFERENCES.glob("*.npz") if not any(tag in p.name for tag in UNTESTED)]
+    return against_saved(paths, tmp_path_factory.mktemp("gridpack"), t_end=T_END)
 
 
 def test_every_reference_is_compared(results):

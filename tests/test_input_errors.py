@@ -265,15 +265,15 @@ def test_islanded_bus():
 # --------------------------------------------------------------------------- #
 
 def test_unsupported_raw_version():
-    """REV = 35 in the first line: CaseError at line 1 listing the supported versions."""
+    """REV = 36 in the first line: CaseError at line 1 listing the supported versions."""
     good = raw_v33(FOUR_BUS, generators=SLACK_GEN, branches=four_bus_branches(1))
-    text = good.replace("0, 100.00, 33,", "0, 100.00, 35,", 1)
+    text = good.replace("0, 100.00, 33,", "0, 100.00, 36,", 1)
     assert text != good
     with pytest.raises(CaseError) as excinfo:
-        parse_raw(text, "rev35.raw")
+        parse_raw(text, "rev36.raw")
     assert str(excinfo.value) == (
-        "rev35.raw:1: case identification: REV = 35: RAW version not supported "
-        "(supported: 23, 30, 31, 32, 33)")
+        "rev36.raw:1: case identification: REV = 36: RAW version not supported "
+        "(supported: 23, 30, 31, 32, 33, 34, 35)")
 
 
 # --------------------------------------------------------------------------- #

@@ -2,9 +2,11 @@
 decision against "no shedding", the stall surrogate leaving trajectories unchanged, and the
 option parser.
 
-The gradient check runs the built-in 39-bus study in float64 (central differences with
-h = 1e-4 then carry ~h² ≈ 1e-8 relative truncation error and ~1e-12/h round-off, so 1e-5
-relative is a safe bound); the decision runs it in float32, as the evaluation does.
+The gradient check runs the built-in 39-bus study in float64, through the MPC's own
+prediction model (10-ms steps, `MpcOptions.dt`) from a state the 2-ms plant reached (central
+differences with h = 1e-4 then carry ~h² ≈ 1e-8 relative truncation error and ~1e-12/h
+round-off, so 1e-5 relative is a safe bound); the decision runs it in float32, as the
+evaluation does.
 """
 from __future__ import annotations
 
@@ -41,10 +43,11 @@ def test_gradient_matches_central_differences_without_stall(ieee39):
         spec = TaskSpec(fault_bus=29, fault_duration=0.08, fault_start=1.0, operating_point=0,
                         fault_r=0.0, fault_x=0.05)
         state, grid = state_at(study, env, spec, 11)
+        model = env.with_config(dt=MpcOptions().dt)  # the MPC's own prediction step, 10 ms
         plan = jnp.full((5, len(env.action_slots)), 0.05)  # inside (0, 0.2): smooth there
-        value = jax.jit(lambda p: horizon_return(env, p, state, study.params, grid))
+        value = jax.jit(lambda p: horizon_return(model, p, state, study.params, grid))
         grad = np.asarray(jax.jit(jax.grad(lambda p: horizon_return(
-            env, p, state, study.params, grid)))(plan))
+            model, p, state, study.params, grid)))(plan))
         h = 1e-4
         for k, j in [(0, 0), (0, 2), (2, 1), (4, 0)]:
             e = jnp.zeros_like(plan).at[k, j].set(h)

@@ -18,12 +18,12 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import SHARED_CASES, andes_cases_dir
+from conftest import SHARED_CASES, andes_cases_dir, stored_mismatch
 from experiments.powerflow import main
 from jaxgrid import cases
 from jaxgrid.io.matpower import from_matpower, load_pypower_case
 from jaxgrid.io.raw import parse_raw, read_raw
-from jaxgrid.powerflow import PowerFlowOptions, admittance_matrix, bus_loads, solve
+from jaxgrid.powerflow import PowerFlowOptions, solve
 
 VM_TOL_STORED = 1e-3  # p.u., PSS/E's own convergence tolerance (see module docstring)
 VA_TOL_STORED = math.radians(0.6)  # the 300-bus 35 % file was solved loosely (0.48 deg)
@@ -53,17 +53,6 @@ def _read(path):
         return read_raw(path)
 
 
-def _stored_mismatch(case):
-    """Per-bus complex power mismatch (n_bus,) of the stored voltages, p.u."""
-    v = case.buses.vm * np.exp(1j * case.buses.va)
-    s_power, s_current, s_impedance = bus_loads(case)
-    gen = case.generators
-    s_gen = np.zeros(case.n_bus, complex)
-    np.add.at(s_gen, gen.bus[gen.in_service], (gen.pg + 1j * gen.qg)[gen.in_service])
-    return (v * np.conj(admittance_matrix(case) @ v) - s_gen + s_power
-            + s_current * case.buses.vm + s_impedance * case.buses.vm ** 2)
-
-
 def test_reference_file_lists_are_complete():
     """Every RAW under ../shared/cases is covered (20 files) and the andes set exists."""
     assert len(SHARED_RAW) == 21, SHARED_RAW
@@ -91,7 +80,7 @@ def test_shared_raw_converges_to_stored_voltages(relative):
 def test_stale_stored_solutions(relative):
     """The excluded files really are stale: > 0.5 p.u. mismatch at the edited bus."""
     case = _read(SHARED_CASES / relative)
-    mismatch = np.abs(_stored_mismatch(case))
+    mismatch = np.abs(stored_mismatch(case))
     bus = case.bus_index(STALE[relative])[0]
     assert mismatch[bus] > 0.5
 

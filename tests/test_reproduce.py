@@ -46,10 +46,18 @@ def study_file(tmp_path_factory):
     return path
 
 
+# The smallest settings: --quick, with fig6b's and fig9's sweeps of the main training's N
+# alone, so that nothing trains for them (their curves are fig6a's code with other N)
+SWEEP = (QUICK.directions,)
+
+
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory, study_file):
+    """The one end-to-end run of every experiment (the suite's smoke run of the harness)."""
     out = tmp_path_factory.mktemp("reproduce")
-    assert main(["--quick", "--study", str(study_file), "--out", str(out)]) == 0
+    sweeps = ",".join(map(str, SWEEP))
+    assert main(["--quick", "--study", str(study_file), "--out", str(out), "--sweep", sweeps,
+                 "--sweep-large", sweeps]) == 0
     return out
 
 
@@ -162,11 +170,11 @@ def test_a_second_run_reuses_the_finished_runs(quick):
     trained = sorted((quick / "runs").glob("*/metrics.jsonl"))
     before = {p: p.stat().st_mtime_ns for p in trained}
     folders = sorted(p.name for p in (quick / "runs").iterdir())
-    run(str(quick / "study.toml"), quick, ["fig6b", "fig8", "fig12"], quick=True)
+    run(str(quick / "study.toml"), quick, ["fig6b", "fig8", "fig12"], quick=True, sweep=SWEEP)
     assert sorted(p.name for p in (quick / "runs").iterdir()) == folders, "nothing new ran"
     assert {p: p.stat().st_mtime_ns for p in trained} == before, "no training touched"
     fig6b = json.loads((quick / "fig6b.json").read_text())
-    walls = [json.loads(line)["wall_s"] for n in QUICK.sweep
+    walls = [json.loads(line)["wall_s"] for n in SWEEP
              for line in next((quick / "runs").glob(f"pars_lstm_N{n}-*"))
              .joinpath("metrics.jsonl").read_text().splitlines()]
     assert fig6b["training_s"] == pytest.approx(sum(walls), abs=0.05), \

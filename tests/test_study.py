@@ -108,7 +108,8 @@ def test_pars_iteration_compiles_once_across_points_and_task_sets(pnnl39):
     from ars.train import TrainConfig, make_trainer
     from jaxgrid.problem import training_problem
 
-    config = ParsConfig(directions=1, top=1, tasks_per_iteration=2)
+    # the iteration of `whole_episodes` below: its 2-task program is compiled once per run
+    config = ParsConfig(directions=2, top=1, tasks_per_iteration=2)
     problem = training_problem(pnnl39, "linear", history=1, episode=0.5)
     trainer = make_trainer(problem, TrainConfig("linear", (), config))
     state = init_state(trainer.policy, config)
@@ -121,27 +122,37 @@ def test_pars_iteration_compiles_once_across_points_and_task_sets(pnnl39):
         "one compilation per task-array shape (2 tasks, 9 tasks), none per operating point"
 
 
-@pytest.mark.parametrize("task_batch", [1, None])
-def test_regrouped_grid_episodes_equal_whole_ones(pnnl39, task_batch):
-    """`PointEpisode` in two parts (`ParsConfig.compact_after`): episodes regrouped after 2
-    agent steps, with one task per batch (the chunk shares it) and with two tasks at two
-    operating points (each rollout gathers its model), give the iteration of whole
-    episodes: the same steps and θ to float32 rounding (the chunks are other batch sizes)."""
+def _regrouping_iteration(study, task_batch, compact_after):
+    """(θ (n,), env steps) after one PARS iteration of a linear policy, N = 2, on two tasks
+    at two operating points, 0.5-s episodes."""
     from ars.pars import ParsConfig, init_state
     from ars.train import TrainConfig, make_trainer
     from jaxgrid.problem import training_problem
 
-    problem = training_problem(pnnl39, "linear", history=1, episode=0.5)
-    tasks = pnnl39.batch([TaskSpec(4, 0.05, 0.1, 0), TaskSpec(15, 0.08, 0.1, 2)])
-    results = []
-    for compact in (None, 2):
-        config = ParsConfig(directions=2, top=1, tasks_per_iteration=2, task_batch=task_batch,
-                            compact_after=compact, compact_chunks=3)
-        trainer = make_trainer(problem, TrainConfig("linear", (), config))
-        state, metrics = trainer.iteration(init_state(trainer.policy, config), tasks,
-                                           problem.data)
-        results.append((np.asarray(state.theta), float(metrics["env_steps"])))
-    (whole, whole_steps), (split, split_steps) = results
+    problem = training_problem(study, "linear", history=1, episode=0.5)
+    tasks = study.batch([TaskSpec(4, 0.05, 0.1, 0), TaskSpec(15, 0.08, 0.1, 2)])
+    config = ParsConfig(directions=2, top=1, tasks_per_iteration=2, task_batch=task_batch,
+                        compact_after=compact_after, compact_chunks=3)
+    trainer = make_trainer(problem, TrainConfig("linear", (), config))
+    state, metrics = trainer.iteration(init_state(trainer.policy, config), tasks, problem.data)
+    return np.asarray(state.theta), float(metrics["env_steps"])
+
+
+@pytest.fixture(scope="module")
+def whole_episodes(pnnl39):
+    """The iteration of whole episodes, both tasks in one batch."""
+    return _regrouping_iteration(pnnl39, None, None)
+
+
+@pytest.mark.parametrize("task_batch", [1, None])
+def test_regrouped_grid_episodes_equal_whole_ones(pnnl39, whole_episodes, task_batch):
+    """`PointEpisode` in two parts (`ParsConfig.compact_after`): episodes regrouped after 2
+    agent steps, with one task per batch (the chunk shares it) and with two tasks at two
+    operating points (each rollout gathers its model), give the iteration of whole
+    episodes: the same steps and θ to float32 rounding (the chunks and the task batches
+    are other batch sizes)."""
+    whole, whole_steps = whole_episodes
+    split, split_steps = _regrouping_iteration(pnnl39, task_batch, 2)
     assert split_steps == whole_steps == 2 * 2 * 2 * 5
     np.testing.assert_allclose(split, whole, rtol=1e-5, atol=1e-5)
 

@@ -87,8 +87,8 @@ def _train_on_two_processes(out, *args):
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
-    env = dict(os.environ, PYTHONPATH=str(REPO),
-               XLA_FLAGS="--xla_force_host_platform_device_count=1")
+    env = dict(os.environ, PYTHONPATH=str(REPO),  # tests/conftest.py's flags, one device
+               XLA_FLAGS=os.environ["XLA_FLAGS"].replace("device_count=2", "device_count=1"))
     procs = [subprocess.Popen(
         [sys.executable, "-m", "experiments.train_39bus", *TINY, *args, "--out", str(out),
          "--coordinator", f"127.0.0.1:{port}", "--num-processes", "2", "--process-id", str(i)],

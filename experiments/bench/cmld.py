@@ -13,30 +13,24 @@
    static loads only (`IEEE300_dyn_v2.dyr`, the same machines), batch of BATCH fault tasks,
    best of ROUNDS alternating warm calls (compile timed apart); the ratio. `--speed-only`
    runs this section alone (into --out).
-4. ACTIVSg2000 (`ACTIVSg2000.RAW` + `ACTIVSg2000_dyn_cmld_zone3_v1.dyr`, lenient: its IEEEST
-   stabilizers and GGOV1 governors are not supported, and machine records their model
-   rejects are dropped (`without_bad_machines`); dt 5 ms as its task configuration):
-   compile time, a 1-s flat run (largest |ΔV|), seconds per simulated second; then again
-   without the exciters and governors that start away from rest or outside their limits
-   (`without_restless_controllers`), to see the composite loads at rest.
+4. ACTIVSg2000 (`ACTIVSg2000.RAW` + `ACTIVSg2000_dyn_cmld_zone3_v1.dyr`, strict; dt 5 ms
+   as its task configuration): compile time, a 1-s flat run (largest |ΔV|), seconds per
+   simulated second. Its fault runs and the A/C-motor file: `experiments.bench.texas`.
 Writes JSON to --out and prints the figures.
 """
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
-import re
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from experiments.bench.inputs import SHARED, without_bad_machines
+from experiments.bench.inputs import SHARED
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.io.dyr import read_dyr
-from jaxgrid.models.machines import MACHINES
 from jaxgrid.io.raw import read_raw
 from jaxgrid.records import DyrData
 from jaxgrid.simulate import FaultEvent, make_task, simulate_batch, stack_tasks
@@ -52,15 +46,15 @@ TIMING_T = 1.0  # s simulated per timed call
 ROUNDS = 10  # alternating timed calls per model
 
 
-def _compile(raw: Path, dyr: Path | DyrData, strict: bool = True):
-    """(model, compile seconds); RAW warnings (tap control not modelled) and InitWarnings
-    are kept in model.notes."""
+def _compile(raw: Path, dyr: Path | DyrData):
+    """(model, compile seconds), strict; RAW warnings (tap control not modelled) and
+    InitWarnings are kept in model.notes."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         case = read_raw(raw)
         start = time.perf_counter()
         data = dyr if isinstance(dyr, DyrData) else read_dyr(dyr)
-        model = compile_model(case, data, CompileOptions(strict=strict))
+        model = compile_model(case, data, CompileOptions())
     return model, time.perf_counter() - start
 
 
@@ -136,21 +130,9 @@ def seconds_per_step(models: dict, dt: float, batch: int = BATCH) -> dict:
     return out
 
 
-def without_restless_controllers(data: DyrData, model) -> tuple[DyrData, list[str]]:
-    """`data` without the exciter and governor records that `model` reports not at rest at
-    t = 0 (InitWarning notes "MODEL at bus B id 'I': ..."), and those notes."""
-    pattern = re.compile(r"^(\w+) at bus (-?\d+) id '([^']*)': (d\w+/dt|initial )")
-    notes = [n for n in model.notes if pattern.match(n)]
-    bad = {(m.group(1), int(m.group(2)), m.group(3).strip().upper())
-           for m in map(pattern.match, notes)}
-    kept = tuple(r for r in data.records if r.model in MACHINES or r.record_type == "USRLOD"
-                 or (r.model, r.bus, r.device_id.strip().upper()) not in bad)
-    return dataclasses.replace(data, records=kept), notes
-
-
 def activsg2000(data: DyrData) -> dict:
     """Compile time, and a 1-s flat run's drift and cost of the 2000-bus case."""
-    big, compile_s = _compile(SHARED / "activsg2000/ACTIVSg2000.RAW", data, strict=False)
+    big, compile_s = _compile(SHARED / "activsg2000/ACTIVSg2000.RAW", data)
     start = time.perf_counter()
     flat = _flat(big, 1.0, DT_2000)
     first = time.perf_counter() - start
@@ -213,23 +195,14 @@ def main(argv=None) -> dict:
     out["speed_ieee300"] = speed(model, args.batch)
 
     if not args.skip_2000:
-        data, dropped = without_bad_machines(
-            SHARED / "activsg2000/ACTIVSg2000_dyn_cmld_zone3_v1.dyr")
-        print(f"activsg2000: {len(dropped)} machine record(s) rejected by their model, dropped "
-              f"(lenient: negative loads): {dropped}")
-        out["activsg2000"], big = activsg2000(data)
-        out["activsg2000"]["machines_dropped"] = dropped
-        quiet, restless = without_restless_controllers(data, big)
-        out["activsg2000_rest"], _ = activsg2000(quiet)
-        out["activsg2000_rest"]["controllers_dropped"] = restless
-        for key, what in (("activsg2000", "as read"),
-                          ("activsg2000_rest", f"without {len(restless)} restless controllers")):
-            a = out[key]
-            print(f"activsg2000 {what}: compile {a['compile_s']:.1f} s, {a['n_bus']} buses, "
-                  f"{a['n_composite']} CMLD; 1-s flat run: max |dV| {a['max_dv']:.2e} at "
-                  f"{a['max_dv_bus']} (composite buses {a['max_dv_composite_buses']:.2e}, "
-                  f"diverged {a['diverged']}), first call {a['first_1s_run_s']:.1f} s, "
-                  f"{a['s_per_simulated_s']:.2f} s per simulated s (warm)")
+        out["activsg2000"], _ = activsg2000(
+            read_dyr(SHARED / "activsg2000/ACTIVSg2000_dyn_cmld_zone3_v1.dyr"))
+        a = out["activsg2000"]
+        print(f"activsg2000: compile {a['compile_s']:.1f} s, {a['n_bus']} buses, "
+              f"{a['n_composite']} CMLD; 1-s flat run: max |dV| {a['max_dv']:.2e} at "
+              f"{a['max_dv_bus']} (composite buses {a['max_dv_composite_buses']:.2e}, "
+              f"diverged {a['diverged']}), first call {a['first_1s_run_s']:.1f} s, "
+              f"{a['s_per_simulated_s']:.2f} s per simulated s (warm)")
 
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2))

@@ -7,11 +7,11 @@ small-step, many-sweep reference over the study's training tasks, without contro
         [--reference-precision float64] [--tasks train] [--episode S]
         [--out benchmarks/cpu/step_accuracy.json]
 
-A candidate is a (step, sweeps, coarse step) triple: the coarse step (`jaxgrid.steppers.Solver.coarse_dt`,
-0 for none) is used outside the fault window, `--fine-window` s after clearing, with
-`--coarse-sweeps` network sweeps (default: the candidate's); `--motor-step` sets how the
-candidates integrate the load models' motors (`Solver.motor_step`; the reference always
-steps them exponentially).
+A candidate is a (step, sweeps, coarse step) triple: the coarse step
+(`jaxgrid.steppers.Solver.coarse_dt`, 0 for none) is used outside the fault window,
+`--fine-window` s after clearing, with `--coarse-sweeps` network sweeps (default: the
+candidate's); `--motor-step` sets how the candidates integrate the load models' motors
+(`Solver.motor_step`; the reference always steps them exponentially).
 
 For each candidate it reports, over every task and agent step (0.1 s samples of the observed
 bus voltages, float32 time loop as in training): the 99th-percentile and largest |ΔV|
@@ -55,13 +55,16 @@ ACCURACY_AT_CHECK = 5e-3  # p.u.: its largest |ΔV| at the recovery check
 STRESS_SHARE = 0.15  # share of the action buses that shed at each agent step under stress
 
 
-def run(study: Study, solver: Solver, episode: float, tasks: str):
+def run(study: Study, solver: Solver, episode: float, tasks: str, timed: bool = True):
     """(vm (n_task, n_steps, n_observed), recovered (n_task,), warm wall time s) without
-    control, the grid integrated by `solver`."""
+    control, the grid integrated by `solver`; with `timed` False the episodes run once (no
+    warm run) and the time is None."""
     env = study.env(solver=solver, episode=episode)
     apply, params, carry = no_control(env)
     specs = study.tasks(tasks)
-    play_specs(study, env, apply, params, specs, carry, trace=True)  # compile
+    _, out = play_specs(study, env, apply, params, specs, carry, trace=True)  # compiles
+    if not timed:
+        return out["vm"], out["recovered"], None
     start = time.perf_counter()
     _, out = play_specs(study, env, apply, params, specs, carry, trace=True)
     return out["vm"], out["recovered"], time.perf_counter() - start
@@ -120,7 +123,7 @@ def accuracy(study: Study, dts, sweeps, reference_dt: float, reference_sweeps: i
         reference = rebuild(study, precision=reference_precision)
         candidate_study = rebuild(study, precision="float32")
     vm_ref, ok_ref, _ = run(reference, Solver(reference_dt, sweeps=reference_sweeps), episode,
-                            tasks)
+                            tasks, timed=False)
     check = check_index(study, tasks, study.config.agent_dt, vm_ref.shape[1])
     rows = []
     for n_sweeps in sweeps:

@@ -6,18 +6,27 @@ the simulation benchmark and the command `experiments.reference.andes`.
 ANDES reads the same PSS/E RAW and DYR files; its `Toggle` records are not part of PSS/E and
 must not be in the DYR. ANDES converts constant-power loads to constant impedance in
 time-domain simulation by default (`PQ.config.p2z = q2z = 1`), which matches `LoadSplit()`'s
-default.
+default. ANDES 2.0's DYR reader takes the values of ESST1A and ESAC1A records in another
+order than PSS/E's (andes/io/psse-dyr.yaml; measured for ESST1A: PSS/E's TC lands in its TB,
+KA in VAMAX, VRMAX in ILR, ...), so `run_andes` hands it a copy with those records in its own
+order (`andes_dyr`).
 """
 from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import re
 import time
 
 import numpy as np
 
 from experiments.reference.errors import at_times, deviation
+from jaxgrid.models.exciters import Esac1a, Esst1a
+
+# Models whose DYR values ANDES 2.0 reads in another order than PSS/E's (ESST1A measured:
+# its TB gets PSS/E's TC, VAMAX gets KA, ...; ESAC1A by its psse-dyr.yaml: VAMAX gets KA, ...)
+REORDERED = {m.name: m for m in (Esst1a, Esac1a)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,7 +51,8 @@ def run_andes(raw: str, dyr: str, t_end: float, fault_bus: int | None = None,
     import andes
 
     andes.config_logger(stream_level=logging.ERROR)
-    ss = andes.load(raw, addfile=dyr, setup=False, no_output=True, default_config=True)
+    ss = andes.load(raw, addfile=andes_dyr(dyr), setup=False, no_output=True,
+                    default_config=True)
     if fault_bus is not None:
         ss.add("Fault", {"bus": fault_bus, "tf": fault_start,
                          "tc": fault_start + fault_duration, "xf": fault_x, "rf": 0.0})
@@ -66,21 +76,66 @@ def run_andes(raw: str, dyr: str, t_end: float, fault_bus: int | None = None,
         wall_s=wall)
 
 
+def andes_dyr(dyr: str) -> str:
+    """`dyr` itself, or where it has records of a model in REORDERED a copy beside it
+    (suffix `.andes.dyr`) whose records of those models list their values in the order
+    ANDES's DYR reader assigns them (its psse-dyr.yaml `inputs`) instead of PSS/E's (the
+    model's stored ICONs, then its CONs)."""
+    import andes
+    import yaml
+
+    with open(dyr) as f:
+        records = f.read().split("/")
+    present = {_model(r) for r in records[:-1]} & set(REORDERED)
+    if not present:
+        return dyr
+    with open(os.path.join(os.path.dirname(andes.__file__), "io", "psse-dyr.yaml")) as f:
+        table = yaml.safe_load(f)
+    orders = {}
+    for name in present:
+        inputs = table[name]["inputs"][2:]  # after BUS, ID
+        model = REORDERED[name]
+        psse = [*(n.upper() for n in model.stored_icons), *(c.name.upper() for c in model.cons)]
+        assert sorted(inputs) == sorted(psse), f"ANDES's {name} inputs {inputs} are not {psse}"
+        orders[name] = (psse, inputs)
+
+    def reordered(record: str) -> str:
+        name = _model(record)
+        if name not in orders:
+            return record
+        psse, inputs = orders[name]
+        before, after = re.split(rf"'\s*{name}\s*'", record, maxsplit=1)
+        device_id, *values = after.split()
+        by_name = dict(zip(psse, values))
+        return f"{before}'{name}' {device_id} " + " ".join(by_name[n] for n in inputs) + " "
+
+    target = os.path.splitext(dyr)[0] + ".andes.dyr"
+    with open(target, "w") as f:
+        f.write("/".join(reordered(r) for r in records[:-1]) + "/\n")
+    return target
+
+
+def _model(record: str) -> str:
+    """The (quoted) model name of a DYR record's text, upper case, or ''."""
+    quoted = re.search(r"'\s*([^'\s]+)\s*'", record)
+    return quoted.group(1).upper() if quoted else ""
+
+
 def write_psse_dyr(source: str, target: str, drop_models: tuple[str, ...] = ()) -> str:
     """Copy a DYR file without ANDES-only `Toggle` records and without `drop_models` records.
 
-    Records end at '/'; a record is dropped when its model name (quoted) is listed.
-    Returns `target`.
+    Records end at '/'; a record is dropped when its model name (quoted) is listed, or
+    "MODEL@BUS" with its bus number (the record's first field). Returns `target`.
     """
     with open(source) as f:
         records = f.read().split("/")
     drop = {m.upper() for m in drop_models} | {"TOGGLE"}
 
-    def model(record: str) -> str:
-        quoted = re.search(r"'\s*([^'\s]+)\s*'", record)
-        return quoted.group(1).upper() if quoted else ""
+    def dropped(record: str) -> bool:
+        fields = record.split()
+        return bool({_model(record), f"{_model(record)}@{fields[0] if fields else ''}"} & drop)
 
-    keep = [r for r in records[:-1] if model(r) not in drop]
+    keep = [r for r in records[:-1] if not dropped(r)]
     with open(target, "w") as f:
         f.write("/".join(keep) + "/\n")
     return target

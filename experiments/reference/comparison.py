@@ -1,7 +1,8 @@
 """jaxgrid beside GridPACK: jaxgrid's runs of the same files and faults, sampled as GridPACK's
 (`run_jaxgrid`), their comparison (`compare`: per bus RMS and largest |ΔV| after clearing and
-the time below 0.9 and 0.8 p.u., per A/C motor its P/Q RMS and stall, restart and thermal-trip
-times), `against` for a whole setup, and `plot`.
+the time below 0.9 and 0.8 p.u., per A/C motor, a composite load's motor D included, its P/Q
+RMS and stall, restart and thermal-trip times), `against` for a whole setup, `against_saved`
+for saved references (the tests), and `plot`.
 """
 from __future__ import annotations
 
@@ -11,32 +12,44 @@ from pathlib import Path
 import numpy as np
 
 from experiments.reference.errors import at_times, deviation
-from experiments.reference.gridpack_files import FAULT_X, Fault, Run, Setup, edited_dyr
+from experiments.reference.gridpack_dyr import edited_dyr
+from experiments.reference.gridpack_files import FAULT_X, Fault, Run, Setup, load_reference
 from jaxgrid.compile import CompileOptions, compile_model
 from jaxgrid.grid import GridModel
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
 from jaxgrid.models.acmotor import motor_power
-from jaxgrid.models.options import MotorOptions
+from jaxgrid.models.options import CompositeOptions, MotorOptions
 from jaxgrid.powerflow import PowerFlowOptions, solve
 from jaxgrid.simulate import FaultEvent, make_task, simulate_batch, stack_tasks
 
 LEVELS = (0.9, 0.8)  # p.u.: the comparison's "time below" levels
+COMPOSITE = ("CMLDBLU2", "CMLDBLU1")  # load-model names whose unit has a motor D
 
 # --------------------------------------------------------------------------- #
 # jaxgrid on the same inputs
 # --------------------------------------------------------------------------- #
 
-def jaxgrid_model(raw: str, dyr: str, heating: str, contactor: str = "memory",
-                  stiff_below: float = MotorOptions().stiff_below) -> GridModel:
-    """The compiled model of the files with the default options but the A/C motors'
-    `heating` and `contactor` rules and the induction motors' `stiff_below` (s), from a
-    power flow without generator Q limits, as GridPACK's (`gridpack_files.Q_LIMITS`)."""
-    options = CompileOptions(motors=MotorOptions(heating=heating, contactor=contactor,
-                                                 stiff_below=stiff_below))
-    case = read_raw(raw)
+def jaxgrid_model(setup: Setup, dyr: str) -> GridModel:
+    """The compiled model of `setup`'s RAW and `dyr` with the default options but the A/C
+    motors' heating and contactor rules, the induction motors' stiff_below (s) and the
+    composite loads' options of `setup`, from a power flow without generator Q limits, as
+    GridPACK's (`gridpack_files.Q_LIMITS`)."""
+    options = CompileOptions(
+        motors=MotorOptions(heating=setup.heating, contactor=setup.contactor,
+                            stiff_below=setup.stiff_below),
+        composite=CompositeOptions(**dict(setup.composite)))
+    case = read_raw(setup.raw)
     pf = solve(case, PowerFlowOptions(enforce_q_limits=False))
     return compile_model(case, read_dyr(dyr), options, pf)
+
+
+def _motor_d(group, k: int, prefix: str):
+    """(params, flag keys) of unit k's A/C motor in a load group: an ACMTBLU1 (prefix "")
+    or a composite load's motor D (prefix "d_")."""
+    params = {name[len(prefix):]: np.asarray(a)[k] if np.ndim(a) else np.asarray(a)
+              for name, a in group.params.items() if name.startswith(prefix)}
+    return params, [name for name in group.model.flags if name.startswith(prefix)]
 
 
 def run_jaxgrid(model: GridModel, faults: list[Fault], t_end: float, dt: float,
@@ -47,18 +60,18 @@ def run_jaxgrid(model: GridModel, faults: list[Fault], t_end: float, dt: float,
                          for f in faults])
     traj = simulate_batch(model, tasks, t_end, dt, decimation)
     columns = [model.bus_numbers.index(b) for b in buses]
-    groups = [(g, k) for g in model.loads if g.model.name == "ACMTBLU1"
-              for k in range(len(g.index))]
-    motor_bus = np.array([model.bus_numbers[model.load_bus[g.index[k]]] for g, k in groups])
+    groups = [(g, k, prefix) for g in model.loads
+              for prefix in {"ACMTBLU1": ("",), **dict.fromkeys(COMPOSITE, ("d_",))}.get(
+                  g.model.name, ()) for k in range(len(g.index))]
+    motor_bus = np.array([model.bus_numbers[model.load_bus[g.index[k]]] for g, k, _ in groups])
     runs = []
     vm_all = np.asarray(traj.vm)
     for i in range(len(faults)):
         flags = []
-        for g, k in groups:
-            z = {name: np.asarray(a)[i][:, k]
-                 for name, a in traj.load_flags[model.loads.index(g)].items()}
-            p = {name: np.asarray(a)[k] if np.ndim(a) else np.asarray(a)
-                 for name, a in g.params.items()}
+        for g, k, prefix in groups:
+            p, keys = _motor_d(g, k, prefix)
+            z = {name[len(prefix):]: np.asarray(traj.load_flags[model.loads.index(g)][name])
+                 [i][:, k] for name in keys}
             s = motor_power(p, z, vm_all[i][:, model.load_bus[g.index[k]]], np)
             flags.append(dict(z, p_motor=s.real, q_motor=s.imag))
 
@@ -143,9 +156,12 @@ def worst(result: dict) -> tuple[float, float]:
 
 
 def motor_th1t(model: GridModel) -> dict[int, float]:
-    """Th1t (p.u.) of each ACMTBLU1 motor by RAW bus number."""
-    return {model.bus_numbers[model.load_bus[slot]]: float(np.asarray(g.params["th1t"])[k])
-            for g in model.loads if g.model.name == "ACMTBLU1" for k, slot in enumerate(g.index)}
+    """Th1t (p.u.) of each A/C motor (ACMTBLU1, a composite's motor D) by RAW bus number
+    (a composite load's: its load bus)."""
+    key = {"ACMTBLU1": "th1t", **dict.fromkeys(COMPOSITE, "d_th1t")}
+    return {model.bus_numbers[model.load_bus[slot]]:
+            float(np.asarray(g.params[key[g.model.name]])[k])
+            for g in model.loads if g.model.name in key for k, slot in enumerate(g.index)}
 
 
 def against(setup: Setup, cases: list[tuple[Fault, Run]], workdir: Path,
@@ -154,9 +170,7 @@ def against(setup: Setup, cases: list[tuple[Fault, Run]], workdir: Path,
     references) against each reference Run, up to t_end (s; default the setup's); jaxgrid's
     model compiled from the setup's files with the default options, unless given."""
     if model is None:
-        dyr = edited_dyr(setup.dyr, setup.edit, workdir / "edited.dyr")
-        model = jaxgrid_model(setup.raw, dyr, setup.heating, setup.contactor,
-                              setup.stiff_below)
+        model = jaxgrid_model(setup, edited_dyr(setup.dyr, setup.edit, workdir / "edited.dyr"))
     t_end = setup.t_end if t_end is None else t_end
     cases = [(fault, ref.until(t_end)) for fault, ref in cases]
     buses = sorted({int(b) for _, ref in cases for b in ref.bus_ids} & set(model.bus_numbers))
@@ -165,6 +179,20 @@ def against(setup: Setup, cases: list[tuple[Fault, Run]], workdir: Path,
                        max(1, round(step / setup.dt)))
     th1t = motor_th1t(model)
     return [(compare(ref, run, fault, th1t), run) for (fault, ref), run in zip(cases, ours)]
+
+
+def against_saved(paths, workdir: Path, t_end: float | None = None) -> list[tuple[str, dict]]:
+    """[(file name, `compare` dict)] of jaxgrid against saved references (`save_reference`
+    files), one jaxgrid batch per setup, up to t_end (s; default each setup's)."""
+    groups: dict = {}
+    for path in sorted(Path(p) for p in paths):
+        run, fault, setup = load_reference(path)
+        groups.setdefault(setup, []).append((path.name, fault, run))
+    out = []
+    for setup, cases in groups.items():
+        rows = against(setup, [(fault, run) for _, fault, run in cases], workdir, t_end=t_end)
+        out += [(name, row) for (name, _, _), (row, _) in zip(cases, rows)]
+    return out
 
 
 def plot(path: Path, fault: Fault, ref: Run, ours: Run) -> None:

@@ -3,7 +3,9 @@
     python -m experiments.reference.gridpack --raw R --dyr D --faults 4:0.08 15:0.05 \\
         [--fault-start 1.0] [--t-end 10] [--dt 0.005] [--heating stalled|gridpack] \\
         [--buses 4 504 ...] [--motors 504 ...] [--motor-cons NAME=VALUE ...] \\
-        [--add-records "504, 'CIM6BL', 1, ... /" ...] --out DIR [--save-references DIR2]
+        [--add-records "504, 'CIM6BL', 1, ... /" ...] [--cmld-source FILE:BUS --cmld-at BUS:ID]
+        [--cmld-cons NAME=VALUE ...] [--motorw gridpack|wecc] [--composite NAME=VALUE ...]
+        --out DIR [--save-references DIR2]
     python -m experiments.reference.gridpack --study FILE --tasks train --out DIR
         (the study's faults at each operating point, jaxgrid with the study's models)
     python -m experiments.reference.gridpack --references tests/references/gridpack/*.npz --out DIR
@@ -22,7 +24,15 @@ against such files without GridPACK (what the tests do).
 
 --motors keeps only some ACMTBLU1 motors, --motor-cons changes their CONs and --add-records
 adds DYR records (another motor model, e.g. CIM6BL) in place of the ACMTBLU1 of their bus
-and load id, in both simulators' files (model-level checks; `MotorEdit`).
+and load id, in both simulators' files (model-level checks; `gridpack_dyr.MotorEdit`).
+--exciter-source FILE:BUS puts that file's exciter at BUS in place of every exciter.
+--cmld-source FILE:BUS --cmld-at BUS:ID places the composite load of another DYR at BUS (a
+CMLDBLU1 record, replacing the ACMTBLU1 of BUS and ID), --cmld-cons changes every composite
+load's CONs. A composite load needs GridPACK with `gridpack_patches/cmld.patch` (README
+there); its internal buses are compared under jaxgrid's numbers and its motor D with the A/C
+motors. --motorw wecc runs GridPACK's MOTORW (motors A-C) with the patch's switches that make
+it the WECC description's motor (`gridpack_files.MOTORW`); --composite sets jaxgrid's
+`CompositeOptions` (e.g. v_floor=0 extra_var=none, GridPACK's readings).
 
 `--heating stalled` (default) runs GridPACK with ACMOTOR_HEAT_STALLED_ONLY=1 (running motors
 add no heat, the PSS/E reading; the kit's switch) and jaxgrid with heating "stalled";
@@ -39,12 +49,14 @@ import tempfile
 from pathlib import Path
 
 from experiments.reference.comparison import against, plot, worst
-from experiments.reference.gridpack_files import (DRIVER, Fault, GridpackMissing, MotorEdit,
-                                                  Setup, edited_dyr, find_driver,
-                                                  load_reference, motor_buses, run_gridpack,
-                                                  save_reference)
+from experiments.reference.gridpack_dyr import (MotorEdit, composite_buses, edited_dyr,
+                                                motor_buses)
+from experiments.reference.gridpack_files import (DRIVER, MOTORW, Fault, GridpackMissing,
+                                                  Setup, find_driver, load_reference,
+                                                  run_gridpack, save_reference)
 from jaxgrid.case import CaseError
 from jaxgrid.io.dyr import DyrError
+from jaxgrid.io.raw import read_raw
 from jaxgrid.models.base import ModelError
 from jaxgrid.models.options import CONTACTORS, HEATING, MotorOptions
 
@@ -73,6 +85,20 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--add-records", nargs="+", default=[], metavar="RECORD",
                    help="DYR records to add, e.g. \"504, 'CIM6BL', 1, 1, 0.01, ...\"; each "
                         "replaces the ACMTBLU1 of its bus and load id")
+    p.add_argument("--cmld-source", default="", metavar="FILE:BUS",
+                   help="a composite load (CMLDBLU1/2 record) of another DYR, for --cmld-at")
+    p.add_argument("--cmld-at", nargs="+", default=[], metavar="BUS:ID",
+                   help="place --cmld-source's composite load there, as CMLDBLU1")
+    p.add_argument("--cmld-cons", nargs="+", default=[], metavar="NAME=VALUE",
+                   help="set CONs of every composite load, e.g. fel=0 fb=0 vtr1a=0")
+    p.add_argument("--exciter-source", default="", metavar="FILE:BUS",
+                   help="replace every exciter by that file's exciter at BUS (GridPACK's "
+                        "ESST1A aborts on its own 300-bus case)")
+    p.add_argument("--motorw", choices=MOTORW, default="gridpack",
+                   help="GridPACK's composite motors A-C as published or with the WECC "
+                        "switches of gridpack_patches/cmld.patch")
+    p.add_argument("--composite", nargs="+", default=[], metavar="NAME=VALUE",
+                   help="jaxgrid's CompositeOptions, e.g. v_floor=0 extra_var=none")
     p.add_argument("--stiff-below", type=float, default=MotorOptions().stiff_below,
                    help="jaxgrid's induction-motor stiff_below, s (0: keep every cage, as "
                         "GridPACK)")
@@ -96,15 +122,33 @@ def _fault(text: str, start: float) -> Fault:
         raise ValueError(f"--faults {text!r}: expected BUS:DURATION, e.g. 4:0.08") from None
 
 
-def _edit(args) -> MotorEdit:
-    cons = []
-    for text in args.motor_cons:
+def _pairs(texts, flag: str, number: bool = True) -> tuple:
+    """((name, value), ...) of NAME=VALUE texts; values float unless number is False."""
+    out = []
+    for text in texts:
         name, _, value = text.partition("=")
         try:
-            cons.append((name.strip().lower(), float(value)))
+            out.append((name.strip().lower(), float(value) if number else value.strip()))
         except ValueError:
-            raise ValueError(f"--motor-cons {text!r}: expected NAME=VALUE") from None
-    return MotorEdit(tuple(args.motors), tuple(cons), tuple(args.add_records))
+            raise ValueError(f"{flag} {text!r}: expected NAME=VALUE") from None
+    return tuple(out)
+
+
+def _edit(args) -> MotorEdit:
+    return MotorEdit(tuple(args.motors), _pairs(args.motor_cons, "--motor-cons"),
+                     tuple(args.add_records), args.cmld_source, tuple(args.cmld_at),
+                     _pairs(args.cmld_cons, "--cmld-cons"), args.exciter_source)
+
+
+def _composite(args) -> tuple:
+    """jaxgrid's CompositeOptions changes: numbers as floats, words as given."""
+    pairs = []
+    for name, value in _pairs(args.composite, "--composite", number=False):
+        try:
+            pairs.append((name, float(value)))
+        except ValueError:
+            pairs.append((name, value))
+    return tuple(pairs)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -154,7 +198,7 @@ def _gridpack_runs(args, command: str, tmp: Path) -> dict:
         raise ValueError("give --raw, --dyr and --faults (or --study FILE, or --references "
                          "FILES)")
     setup = Setup(args.raw, args.dyr, args.t_end, args.dt, args.heating, _edit(args),
-                  args.contactor, args.stiff_below)
+                  args.contactor, args.stiff_below, args.motorw, _composite(args))
     faults = [_fault(text, args.fault_start) for text in args.faults]
     return {setup: _run_all(args, setup, faults, command, tmp)}
 
@@ -185,12 +229,13 @@ def _run_all(args, setup: Setup, faults: list[Fault], command: str, tmp: Path) -
     """[(fault, GridPACK Run, where it was saved or "gridpack")] of `faults` on `setup`."""
     driver = find_driver(args.gridpack)
     dyr = edited_dyr(setup.dyr, setup.edit, tmp / "edited.dyr")
-    motors = motor_buses(dyr, setup.edit)
+    composites = composite_buses(read_raw(setup.raw), dyr)
+    watched = {*motor_buses(dyr, setup.edit), *(c.bus for c in composites),
+               *(c.low for c in composites), *(c.load for c in composites)}
     cases = []
     for fault in faults:
-        buses = args.buses or sorted({fault.bus, *motors})
-        ref = run_gridpack(driver, setup.raw, dyr, fault, setup.t_end, setup.dt, buses,
-                           setup.heating, tmp / fault.name)
+        buses = args.buses or sorted({fault.bus, *watched})
+        ref = run_gridpack(driver, setup, dyr, fault, buses, tmp / fault.name)
         source = "gridpack"
         if args.save_references:
             tag = f"_{args.name}" if args.name else ""

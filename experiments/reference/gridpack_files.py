@@ -1,8 +1,10 @@
 """GridPACK's side of the reference: its XML input, the run of its `dsf_obs.x` driver, its CSV
-output, model-level variants of a DYR's A/C motors, and the reference files kept in the
-repository (`save_reference`, `load_reference`). The driver is the one of
-../shared/reference/gridpack (found with --gridpack, DSF_OBS or GRIDPACK_HOME; one MPI
-process); the command is `experiments.reference.gridpack`.
+output and the reference files kept in the repository (`save_reference`, `load_reference`);
+the DYR side (model-level variants, GridPACK's DYR, composite-load buses) is
+`experiments.reference.gridpack_dyr`. The driver is the one of ../shared/reference/gridpack
+(found with --gridpack, DSF_OBS or GRIDPACK_HOME; one MPI process), with this project's
+patches applied for composite loads (`gridpack_patches/`, README there); the command is
+`experiments.reference.gridpack`.
 """
 from __future__ import annotations
 
@@ -16,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.reference.gridpack_dyr import MotorEdit, composite_buses, gridpack_dyr
+from experiments.reference.gridpack_raw import raw33
 from jaxgrid.case import Case
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import raw_version, read_raw
-from jaxgrid.models.acmotor import Acmtblu1
 from jaxgrid.models.options import MotorOptions
 
 FAULT_X = 1e-9  # p.u.: GridPACK's faultEvent puts −j1e9 on the faulted bus's diagonal
@@ -27,6 +30,12 @@ GRIDPACK_COMMIT = "bea5ce1"  # the kit's source snapshot (../shared/reference/gr
 DRIVER = "build/applications/dynamic_simulation_full_y/dsf_obs.x"  # under GRIDPACK_HOME
 RAW_TAGS = {23: "networkConfiguration", 33: "networkConfiguration_v33"}  # GridPACK's readers
 MOTOR_FIELDS = ("Vmeas", "statusA", "statusB", "P", "Q", "thetaA", "thetaB")  # load watch
+PATCHES = "experiments/reference/gridpack_patches"  # this project's patches (README there)
+PATCH_MARK = b"jaxgrid cmld.patch 1"  # in a driver built with gridpack_patches/cmld.patch
+# MOTORW, GridPACK's motors A-C of a composite load: "gridpack" runs it as published,
+# "wecc" with the patch's switches that make it the WECC description's motor (README there)
+MOTORW = {"gridpack": (), "wecc": ("MOTORW_SWING_TORQUE", "MOTORW_LOAD_TORQUE_RATIO",
+                                   "MOTORW_NOMINAL_FREQ")}
 # Q_LIMITS: GridPACK's power flow enforces generator Q limits only with <qlim>1</qlim>; the
 # PNNL/HADREC inputs write <qLimit>True</qLimit>, which it does not read, so the PARS study
 # ran without them, and with <qlim>1</qlim> it diverges on HADREC's 300-bus case. Both
@@ -178,26 +187,38 @@ def gridpack_xml(raw: str, version: int, dyr: str, branch: tuple[int, int], faul
 """
 
 
-def run_gridpack(driver: Path, raw: str, dyr: str, fault: Fault, t_end: float, dt: float,
-                 buses, heating: str, workdir: Path) -> Run:
-    """GridPACK's trajectories of `fault` (GridpackMissing if it fails)."""
-    case = read_raw(raw)
-    motors = [(r.bus, r.device_id) for r in read_dyr(dyr).by_model("ACMTBLU1")]
+def run_gridpack(driver: Path, setup: Setup, dyr: str, fault: Fault, buses,
+                 workdir: Path) -> Run:
+    """GridPACK's trajectories of `fault` on `setup`'s RAW and `dyr` (GridpackMissing if it
+    fails). `buses` and the Run's bus numbers are jaxgrid's, composite loads' internal buses
+    included (`gridpack_dyr.composite_buses`); each composite load's motor D is watched
+    with the A/C motors, under its load-bus number."""
     workdir.mkdir(parents=True, exist_ok=True)
+    raw, version = setup.raw, raw_version(setup.raw)
+    if version not in RAW_TAGS:  # e.g. the PNNL 300-bus v30: written as v33
+        raw, version = str(workdir / "case_v33.raw"), 33
+        Path(raw).write_text(raw33(read_raw(setup.raw)))
+    case = read_raw(raw)
+    composites = composite_buses(case, dyr)
+    if composites:
+        require_cmld_patch(driver)
+    to_gridpack = {c.load: c.gridpack_load for c in composites}
+    to_gridpack.update({c.low: c.gridpack_low for c in composites})
+    motors = [(r.bus, r.device_id) for r in read_dyr(dyr).by_model("ACMTBLU1")]
+    motors += [(c.gridpack_load, "D") for c in composites if c.fmd > 0]
     branch, raw_text = fault_branch(case, fault.bus, Path(raw).read_text(errors="replace"))
     (workdir / "case.raw").write_text(raw_text)
-    # GridPACK's DYR parser loses the first record of a file that starts with a UTF-8 byte
-    # order mark (the PNNL 39-bus DYR does; its bus-30 GENSAL is repeated, perhaps for this)
-    (workdir / "case.dyr").write_text(Path(dyr).read_text(encoding="utf-8-sig"))
-    version = raw_version(raw)
-    (workdir / "input.xml").write_text(gridpack_xml("case.raw", version, "case.dyr", branch, fault,
-                                                    t_end, dt, buses, motors))
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    forward = []
-    env.pop("ACMOTOR_HEAT_STALLED_ONLY", None)
-    if heating == "stalled":
-        env["ACMOTOR_HEAT_STALLED_ONLY"] = "1"
-        forward = ["-x", "ACMOTOR_HEAT_STALLED_ONLY"]
+    gridpack_dyr(dyr, workdir / "case.dyr")
+    observed = [to_gridpack.get(b, b) for b in buses]
+    (workdir / "input.xml").write_text(gridpack_xml(
+        "case.raw", version, "case.dyr", branch, fault, setup.t_end, setup.dt,
+        observed, motors))
+    switches = (("ACMOTOR_HEAT_STALLED_ONLY",) if setup.heating == "stalled" else ()) \
+        + MOTORW[setup.motorw]
+    env = {k: v for k, v in os.environ.items() if k not in SWITCHES}
+    env.update({name: "1" for name in switches}, OMPI_ALLOW_RUN_AS_ROOT="1",
+               OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    forward = [a for name in switches for a in ("-x", name)]
     command = ["mpirun", "-np", "1", *forward, str(driver), "input.xml", "obs.csv"]
     done = subprocess.run(command, cwd=workdir, env=env, capture_output=True, text=True,
                           timeout=1800)
@@ -206,12 +227,25 @@ def run_gridpack(driver: Path, raw: str, dyr: str, fault: Fault, t_end: float, d
         tail = "\n".join((done.stdout + done.stderr).splitlines()[-15:])
         raise GridpackMissing(f"GridPACK failed on {workdir / 'input.xml'} "
                               f"(log {workdir / 'gridpack.log'}):\n{tail}")
-    return read_gridpack_csv(workdir / "obs.csv", workdir / "motor_watch.csv", dt)
+    run = read_gridpack_csv(workdir / "obs.csv", workdir / "motor_watch.csv", setup.dt)
+    to_ours = {g: b for b, g in to_gridpack.items()}
+    return dataclasses.replace(
+        run, bus_ids=np.array([to_ours.get(int(b), int(b)) for b in run.bus_ids]),
+        motor_bus=np.array([to_ours.get(int(b), int(b)) for b in run.motor_bus], dtype=int))
+
+
+def require_cmld_patch(driver: Path) -> None:
+    """GridpackMissing unless `driver` was built with this project's composite-load patch."""
+    if PATCH_MARK not in Path(driver).read_bytes():
+        raise GridpackMissing(
+            f"{driver} lacks {PATCHES}/cmld.patch, which GridPACK's composite load needs "
+            f"(as published it does not start at rest): apply it with {PATCHES}/apply.sh")
 
 
 def read_gridpack_csv(observations: Path, motor_watch: Path, dt: float) -> Run:
     """The driver's CSV (a row of t = (k + 1)·dt holds step k's network solution, labelled
-    t_k here; the first row is the state before the first step) and its motor watch file."""
+    t_k here; the first row is the state before the first step) and its motor watch file
+    (the A/C motors' lines; a composite's MOTORW lines, patched in, are left out)."""
     rows = list(csv.reader(observations.open()))
     head = [h.strip() for h in rows[0]]
     data = np.array([[float(x) for x in r] for r in rows[2:]])
@@ -224,8 +258,9 @@ def read_gridpack_csv(observations: Path, motor_watch: Path, dt: float) -> Run:
             record, k = {}, 1
             while k + len(MOTOR_FIELDS) < len(fields):
                 bus = int(fields[k])
-                for j, name in enumerate(MOTOR_FIELDS):
-                    record[(bus, name)] = float(fields[k + 1 + j])
+                if float(fields[k + 2]) >= 0:  # statusA -1: a composite's induction motor
+                    for j, name in enumerate(MOTOR_FIELDS):
+                        record[(bus, name)] = float(fields[k + 1 + j])
                 k += len(MOTOR_FIELDS) + 1
             watch[round(float(fields[0]), 6)] = record
     motor_bus = sorted({b for rec in watch.values() for b, _ in rec})
@@ -245,83 +280,18 @@ def read_gridpack_csv(observations: Path, motor_watch: Path, dt: float) -> Run:
 
 
 # --------------------------------------------------------------------------- #
-# Model-level variants: the same files with some A/C motors kept and CONs changed
-# --------------------------------------------------------------------------- #
-
-@dataclasses.dataclass(frozen=True)
-class MotorEdit:
-    """ACMTBLU1 records to keep (RAW bus numbers; empty: all), CONs to set on them
-    ({name: value}, names as in `jaxgrid.models.acmotor.Acmtblu1.cons`) and DYR records to
-    add (text, e.g. a CIM6BL), each replacing the ACMTBLU1 of its bus and load id; a dropped
-    motor's load stays a static load."""
-
-    keep: tuple[int, ...] = ()
-    cons: tuple[tuple[str, float], ...] = ()
-    records: tuple[str, ...] = ()
-
-    @property
-    def empty(self) -> bool:
-        return not (self.keep or self.cons or self.records)
-
-
-def edited_dyr(dyr: str, edit: MotorEdit, out: Path) -> str:
-    """`dyr` with `edit` applied, written to `out` (returned); `dyr` itself when empty."""
-    if edit.empty:
-        return dyr
-    names = [c.name for c in Acmtblu1.cons]
-    unknown = [n for n, _ in edit.cons if n not in names]
-    if unknown:
-        raise ValueError(f"--motor-cons {unknown}: ACMTBLU1 CONs are {', '.join(names)}")
-    lines = Path(dyr).read_text(encoding="utf-8-sig").splitlines()
-    records = read_dyr(dyr).by_model("ACMTBLU1")
-    missing = sorted(set(edit.keep) - {r.bus for r in records})
-    if missing:
-        raise ValueError(f"--motors {missing}: {dyr} has no ACMTBLU1 record there")
-    added = [text.strip().rstrip("/").strip() + " /" for text in edit.records]
-    replaced = {(r.bus, r.device_id) for r in _added_records(edit, out)}
-    drop, kept = set(), []
-    for r in records:
-        end = next(k for k in range(r.line - 1, len(lines)) if "/" in lines[k])
-        drop.update(range(r.line - 1, end + 1))
-        if (not edit.keep or r.bus in edit.keep) and (r.bus, r.device_id) not in replaced:
-            cons = list(r.cons)
-            for name, value in edit.cons:
-                cons[names.index(name)] = value
-            values = ", ".join(f"{v:g}" for v in (*r.header, *r.icons, *cons))
-            kept.append(f"{r.bus}, 'USRLOD', {r.device_id}, 'ACMTBLU1', {values} /")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join([x for k, x in enumerate(lines) if k not in drop] + kept + added)
-                   + "\n")
-    return str(out)
-
-
-def _added_records(edit: MotorEdit, out: Path) -> list:
-    """The DYR records `edit` adds, read through a scratch file beside `out`."""
-    if not edit.records:
-        return []
-    scratch = out.with_name(out.stem + "_added.dyr")
-    scratch.parent.mkdir(parents=True, exist_ok=True)
-    scratch.write_text("".join(t.strip().rstrip("/").strip() + " /\n" for t in edit.records))
-    return list(read_dyr(scratch, strict=False).records)
-
-
-def motor_buses(edited: str, edit: MotorEdit) -> list[int]:
-    """RAW buses of the A/C motors in `edited` (a DYR written by `edited_dyr` with `edit`)
-    and of the records `edit` adds."""
-    added = _added_records(edit, Path(edited))
-    return sorted({r.bus for r in read_dyr(edited).by_model("ACMTBLU1")}
-                  | {r.bus for r in added})
-
-
-# --------------------------------------------------------------------------- #
 # References kept in the repository
 # --------------------------------------------------------------------------- #
+
+SWITCHES = ("ACMOTOR_HEAT_STALLED_ONLY",) + MOTORW["wecc"]  # GridPACK's switches, all
+
 
 @dataclasses.dataclass(frozen=True)
 class Setup:
     """What both simulators run, besides the fault: files (paths as given), horizon and step
     (s), A/C motor heating (both) and edit, jaxgrid's contactor rule (GridPACK has its own)
-    and jaxgrid's `MotorOptions.stiff_below` (s; GridPACK integrates every cage)."""
+    and `MotorOptions.stiff_below` (s; GridPACK integrates every cage), GridPACK's MOTORW
+    reading (`MOTORW`) and jaxgrid's `CompositeOptions` changes ((name, value) pairs)."""
 
     raw: str
     dyr: str
@@ -331,16 +301,20 @@ class Setup:
     edit: MotorEdit = MotorEdit()
     contactor: str = "memory"
     stiff_below: float = MotorOptions().stiff_below
+    motorw: str = "gridpack"
+    composite: tuple[tuple[str, object], ...] = ()
+
+    def __post_init__(self):
+        if self.motorw not in MOTORW:
+            raise ValueError(f"motorw = {self.motorw!r}: allowed {', '.join(MOTORW)}")
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
 
     @classmethod
     def from_json(cls, d: dict) -> Setup:
-        edit = d.get("edit") or {}
-        return cls(**dict(d, edit=MotorEdit(tuple(edit.get("keep", ())),
-                                            tuple(tuple(c) for c in edit.get("cons", ())),
-                                            tuple(edit.get("records", ())))))
+        return cls(**dict(d, edit=MotorEdit.from_json(d.get("edit") or {}),
+                          composite=tuple(tuple(c) for c in d.get("composite", ()))))
 
 
 def save_reference(path: Path, run: Run, fault: Fault, setup: Setup, command: str,

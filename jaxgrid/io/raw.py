@@ -1,4 +1,4 @@
-"""PSS/E RAW power-flow data reader: versions 23, 30 and 31-33.
+"""PSS/E RAW power-flow data reader: versions 23, 30, 31-33, 34 and 35.
 
 Follows the record layouts of the PSS/E Program Operation Manual (POM),
 "Power Flow Raw Data File Contents", for each revision:
@@ -9,6 +9,31 @@ Follows the record layouts of the PSS/E Program Operation Manual (POM),
 - v30: bus (I, NAME, BASKV, IDE, GL, BL, AREA, ZONE, VM, VA, OWNER), separate
   load data, two- and three-winding transformer records of 4/5 lines.
 - v31-v33: bus without GL/BL, a fixed-shunt section, switched shunts after FACTS.
+- v34: a system-wide data section (solution parameters, rating-set names) before
+  the buses; branches with a NAME and 12 ratings (GI, BI, GJ, BJ, ST at fields
+  20-24); a system switching device section after the branches (read as branches
+  of reactance X, STAT); 12 ratings per transformer winding (COD at field 16);
+  loads with distributed generation (DGENP, DGENQ, DGENM); impedance-correction
+  tables over several lines (a table ends on a line with fewer than six
+  non-zero points); a substation section at the end (each substation followed by
+  its node, switching-device and terminal blocks, each closed by `0`); `@!`
+  lines are column headings. Generators and switched shunts as in v33, NREG last.
+- v35: v34 with NREG after IREG in generator records (MBASE at field 10, STAT at
+  16, PT/PB at 18/19) and an ID after I in switched shunts (STAT at field 5, BINIT
+  at 12), as GridPACK's PTI35 parser and powsybl's v35 records read them.
+
+Reading real files as they are written (each assumption is a note in `Case.notes`):
+- a first line without REV is v23 unless the first bus record says otherwise: a
+  quoted (or non-numeric) NAME as its second field is v30 (11 fields) or v33
+  (otherwise); the version inferred is noted. v34/v35 cannot be told from their
+  records; a file without REV that has a system-wide data section needs
+  `version=`;
+- a file may end after its last non-empty section, with or without that
+  section's closing `0` line: the sections not given are empty (noted). A file
+  that ends before the transformer data, or inside a multi-line record, is
+  truncated (CaseError).
+- a v34/v35 file whose bus records follow the title lines has no system-wide
+  data section (noted).
 
 Modelled: buses, loads (constant power/current/admittance parts), fixed and bus
 shunts, switched shunts (fixed at BINIT), generators, branches with line
@@ -32,7 +57,7 @@ from typing import Any
 from jaxgrid.case import ISOLATED, TAP_RATIO, VOLTAGE, Case, CaseError, build_case
 from jaxgrid.checks import Range
 
-SUPPORTED_VERSIONS = (23, 30, 31, 32, 33)
+SUPPORTED_VERSIONS = (23, 30, 31, 32, 33, 34, 35)
 
 _SECTIONS = {
     23: ("bus", "generator", "branch", "transformer adjustment", "area", "two-terminal dc",
@@ -45,11 +70,26 @@ _SECTIONS = {
          "two-terminal dc", "vsc dc", "impedance correction", "multi-terminal dc",
          "multi-section line", "zone", "inter-area transfer", "owner", "facts",
          "switched shunt", "gne", "induction machine"),
+    34: ("system-wide", "bus", "load", "fixed shunt", "generator", "branch", "switching device",
+         "transformer", "area", "two-terminal dc", "vsc dc", "impedance correction",
+         "multi-terminal dc", "multi-section line", "zone", "inter-area transfer", "owner",
+         "facts", "switched shunt", "gne", "induction machine", "substation"),
 }
-_LAYOUT = {23: 23, 30: 30, 31: 33, 32: 33, 33: 33}
+_SECTIONS[35] = _SECTIONS[34]
+_LAYOUT = {23: 23, 30: 30, 31: 33, 32: 33, 33: 33, 34: 34, 35: 35}
 # A file may end after these sections; stopping earlier means it is truncated.
-_REQUIRED = {23: "branch", 30: "transformer", 33: "transformer"}
+_REQUIRED = {23: "branch", 30: "transformer", 33: "transformer", 34: "transformer",
+             35: "transformer"}
 _LINES_PER_RECORD = {"two-terminal dc": 3, "vsc dc": 3}
+# Field indices (0-based) that moved between layouts.
+_GENERATOR = {35: dict(mbase=9, zr=10, zx=11, stat=15, pt=17, pb=18)}
+_GENERATOR_V33 = dict(mbase=8, zr=9, zx=10, stat=14, pt=16, pb=17)
+_BRANCH_SHUNTS = {23: (11, 12, 13, 14, 15), 34: (19, 20, 21, 22, 23), 35: (19, 20, 21, 22, 23)}
+_BRANCH_SHUNTS_V30 = (9, 10, 11, 12, 13)  # GI, BI, GJ, BJ, ST of v30-v33
+_SWITCHED_SHUNT = {23: (5, None), 30: (7, None), 33: (9, 3), 34: (9, 3), 35: (11, 4)}  # BINIT, STAT
+_END_OF_DATA = "Q"  # PSS/E's end-of-data line
+_END_OF_FILE = "end of file"
+THRSHZ = 1e-4  # p.u.: PSS/E's zero-impedance threshold
 
 # Any RAW real beyond this magnitude is a typing error (MW, Mvar, kV, p.u., W all stay far
 # below it); integers are Fortran INTEGER*4; bus numbers as PSS/E allows.
@@ -161,9 +201,10 @@ class _Lines:
         return self.pos >= len(self.lines)
 
 
-def _detect_version(first: list[str], source: str) -> int:
+def _stated_version(first: list[str], source: str) -> int | None:
+    """REV of the case identification record, None when the field is absent."""
     if len(first) < 3 or first[2] == "":
-        return 23
+        return None
     try:
         version = int(float(first[2]))
     except (ValueError, OverflowError):
@@ -174,84 +215,193 @@ def _detect_version(first: list[str], source: str) -> int:
     return version
 
 
+def _quoted_field(text: str) -> int | None:
+    """Index of the first quoted field of a data line, None when it has none."""
+    quotes = [i for i in (text.find("'"), text.find('"')) if i >= 0]
+    if not quotes:
+        return None
+    before = text[:min(quotes)]
+    return None if "/" in before else len(split_fields(before))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text.replace("D", "E").replace("d", "e"))
+    except ValueError:
+        return False
+    return True
+
+
+def infer_version(text: str) -> int | None:
+    """The RAW version the first data record after the title lines implies, for a file without
+    REV: 30 when its second field is a NAME (quoted, or not a number) in an 11-field record
+    (v30 has GL, BL), 33 for a NAME otherwise (v31-v33: 9 fields, v33: 13), else 23 (the
+    second field is the type IDE; NAME is 10th). None when the line is no bus record (a
+    v34/v35 system-wide data record, a `0` line)."""
+    fields = split_fields(text)
+    if len(fields) < 2 or not _is_number(fields[0]) or fields[0].strip() == "0":
+        return None
+    quoted = _quoted_field(text)
+    if quoted == 1 or (quoted is None and not _is_number(fields[1])):  # a NAME second
+        return 30 if len(fields) == 11 else 33
+    return 23
+
+
 class _RawParser:
     """Reads one RAW file into rows for `build_case`."""
 
     def __init__(self, text: str, source: str, version: int | None):
         self.source = source
         self.cursor = _Lines(text.lstrip("\ufeff"), source)
+        self.notes: list[str] = []
         _, first = self.cursor.next("case identification")
         head = _Record(split_fields(first), source, 1, "case identification")
-        self.version = version or _detect_version(head.fields, source)
+        stated = _stated_version(head.fields, source)
+        self.cursor.next("case title")
+        self.cursor.next("case title")
+        self.version = version or stated or self._inferred_version()
         self.layout = _LAYOUT[self.version]
         self.base_mva = head.num(1, "SBASE", 100.0, SYSTEM_BASE)
         self.frequency = 60.0 if self.version == 23 else head.num(
             5, "BASFRQ", 60.0, FREQUENCY) or 60.0
-        self.cursor.next("case title")
-        self.cursor.next("case title")
         self.rows: dict[str, list[dict[str, Any]]] = {
             k: [] for k in ("buses", "loads", "shunts", "generators", "branches")}
         self.areas: dict[int, str] = {}
         self.zones: dict[int, str] = {}
         self.skipped: dict[str, int] = {}
-        self.notes: list[str] = []
         self.bus_rows: dict[int, dict[str, Any]] = {}
         self.star_count = 0
         self.transformer_lines: dict[tuple, int] = {}  # (buses, ckt) -> first line
+
+    def _next_data_line(self) -> int | None:
+        """0-based index of the next line that is neither blank nor an `@!` heading."""
+        lines = self.cursor.lines
+        return next((k for k in range(self.cursor.pos, len(lines))
+                     if lines[k].strip() and not lines[k].lstrip().startswith("@!")), None)
+
+    def _inferred_version(self) -> int:
+        """The version of a file without REV, from its first data record (`infer_version`):
+        23 (PSS/E's reading of a missing REV) silently, another with a note."""
+        first = self._next_data_line()
+        if first is None:
+            return 23
+        version = infer_version(self.cursor.lines[first])
+        if version is None:
+            raise CaseError("case identification has no REV and the first data record "
+                            f"(line {first + 1}) is no v23, v30 or v33 bus record: the RAW "
+                            "version cannot be inferred; give it (read_raw(path, version=34))",
+                            self.source, 1)
+        if version != 23:
+            self.notes.append(f"{self.source}:1: case identification has no REV; read as "
+                              f"v{version}, the layout of the bus record at line {first + 1}")
+        return version
 
     # -- driving -------------------------------------------------------------
     def parse(self) -> None:
         sections = _SECTIONS[self.layout]
         required = sections.index(_REQUIRED[self.layout])
         for k, section in enumerate(sections):
-            if self.cursor.at_end():
+            if section == "system-wide" and self._bus_data_first():
+                continue
+            ended, n_records = self._section(section)
+            if ended is None:
+                continue
+            if ended == _END_OF_FILE:
                 if k <= required:
-                    raise CaseError(f"unexpected end of file before {section} data",
-                                    self.source, len(self.cursor.lines))
-                return
-            if not self._section(section):
-                return
+                    raise CaseError(
+                        f"unexpected end of file in {section} data (the section's closing "
+                        "'0' line is missing)" if n_records else
+                        f"unexpected end of file before {section} data",
+                        self.source, len(self.cursor.lines))
+                where = (f"in the {section} data, without its closing '0' line" if n_records
+                         else f"before the {section} data")
+                self.notes.append(
+                    f"{self.source}:{len(self.cursor.lines)}: the file ends {where}; the "
+                    f"sections from there on ({', '.join(sections[k:])}) hold no more records")
+            return
 
-    def _record_start(self, section: str) -> tuple[int, list[str]] | None:
-        """Next record's first line, or None at the section's closing `0` line."""
-        while True:
-            number, text = self.cursor.next(
-                f"{section} data (the section's closing '0' line is missing)")
+    def _bus_data_first(self) -> bool:
+        """Whether a v34+ file goes from its title lines straight to bus records (no
+        system-wide data section, as some writers leave it out), noted."""
+        first = self._next_data_line()
+        if first is None or infer_version(self.cursor.lines[first]) is None:
+            return False
+        self.notes.append(f"{self.source}:{first + 1}: no system-wide data section: the bus "
+                          "data begin here")
+        return True
+
+    def _record_start(self, section: str) -> tuple[int, list[str]] | str | None:
+        """Next record's first line, None at the section's closing `0` line, `_END_OF_DATA`
+        at a `Q` line, `_END_OF_FILE` when the file ends first. Blank lines and `@!` column
+        headings are passed over."""
+        while not self.cursor.at_end():
+            number, text = self.cursor.next(f"{section} data")
             stripped = text.strip()
+            if stripped.startswith("@!"):
+                continue
             if stripped.upper().startswith("Q"):
-                return number, ["Q"]
+                return _END_OF_DATA
             fields = split_fields(text)
             if not fields:
                 continue
             if fields[0].strip() == "0":
                 return None
             return number, fields
+        return _END_OF_FILE
 
-    def _section(self, section: str) -> bool:
-        """Read one section; False when the file's `Q` end marker was met."""
+    def _section(self, section: str) -> tuple[str | None, int]:
+        """Read one section: (None after its closing `0` line, else how the data ended:
+        `_END_OF_DATA` or `_END_OF_FILE`; the number of records read)."""
         handler = getattr(self, "_" + section.replace(" ", "_").replace("-", "_"), None)
-        while (start := self._record_start(section)) is not None:
+        n_records = 0
+        while True:
+            start = self._record_start(section)
+            if start is None or isinstance(start, str):
+                return start, n_records
             number, fields = start
-            if fields == ["Q"]:
-                return False
             record = _Record(fields, self.source, number, f"{section} record")
             if handler is None:
                 self._skip(section, record)
             else:
                 handler(record)
-        return True
+            n_records += 1
 
     def _skip(self, section: str, rec: _Record) -> None:
-        """Count a record of a section not modelled and pass over its continuation lines (a
-        multi-terminal dc record: one per converter, dc bus and dc link, NCONV + NDCBS +
-        NDCLN)."""
+        """Count a record of a section not modelled and pass over its continuation lines: a
+        multi-terminal dc record has one per converter, dc bus and dc link (NCONV + NDCBS +
+        NDCLN); a GNE record a status line and its REAL, INTG and CHAR values, ten per line;
+        a v34+ impedance-correction table runs until a line with fewer than six non-zero
+        points; a v34+ substation its node, switching-device and terminal blocks."""
         extra = _LINES_PER_RECORD.get(section, 1) - 1
         if section == "multi-terminal dc" and len(rec.fields) >= 4:
             extra = sum(rec.int(k, name, allowed=DC_COUNT)
                         for k, name in ((1, "NCONV"), (2, "NDCBS"), (3, "NDCLN")))
+        elif section == "gne":
+            n_term = rec.int(2, "NTERM", allowed=DC_COUNT)
+            counts = [rec.int(3 + n_term + k, name, 0, DC_COUNT)
+                      for k, name in enumerate(("NREAL", "NINTG", "NCHAR"))]
+            extra = 1 + sum(-(-c // 10) for c in counts)
+        elif section == "impedance correction" and self.layout >= 34:
+            self._skip_table(rec)
+        elif section == "substation":
+            for block in ("node", "switching device", "equipment terminal"):
+                while self._record_start(f"substation {block}") not in (None, _END_OF_DATA,
+                                                                         _END_OF_FILE):
+                    pass
         for _ in range(extra):
             self.cursor.next(f"{section} data")
         self.skipped[section] = self.skipped.get(section, 0) + 1
+
+    def _skip_table(self, rec: _Record) -> None:
+        """Pass over the lines of a v34+ impedance-correction table (record `rec`: I, then
+        points T, Re(F), Im(F), six per line): it ends on the first line with fewer than six
+        non-zero points (PSS/E closes a table with a 0.0, 0.0, 0.0 point)."""
+        line, first = rec, 1
+        while True:
+            values = [line.num(k, f"field {k + 1}", 0.0) for k in range(first, len(line.fields))]
+            if sum(any(values[j:j + 3]) for j in range(0, len(values), 3)) < 6:
+                return
+            line, first = self._continuation(rec), 0
 
     # -- records -------------------------------------------------------------
     def _bus(self, rec: _Record) -> None:
@@ -302,10 +452,17 @@ class _RawParser:
     def _load(self, rec: _Record) -> None:
         bus, load_id = rec.int(0, "I"), rec.text(1)
         rec.what = f"load at bus {bus} id '{load_id}'"
-        self._add_load(bus, load_id, rec.int(2, "STATUS", 1) != 0,
-                       rec.num(5, "PL", 0.0), rec.num(6, "QL", 0.0), rec.num(7, "IP", 0.0),
-                       rec.num(8, "IQ", 0.0), rec.num(9, "YP", 0.0), rec.num(10, "YQ", 0.0),
-                       rec.line)
+        pl, ql = rec.num(5, "PL", 0.0), rec.num(6, "QL", 0.0)
+        if self.layout >= 34 and rec.int(16, "DGENM", 0) != 0:
+            dgen_p, dgen_q = rec.num(14, "DGENP", 0.0), rec.num(15, "DGENQ", 0.0)
+            if dgen_p or dgen_q:
+                self.notes.append(f"{self.source}:{rec.line}: {rec.what}: distributed "
+                                  f"generation DGENP = {dgen_p:g} MW, DGENQ = {dgen_q:g} Mvar "
+                                  "(DGENM on) taken off its constant-power part")
+                pl, ql = pl - dgen_p, ql - dgen_q
+        self._add_load(bus, load_id, rec.int(2, "STATUS", 1) != 0, pl, ql,
+                       rec.num(7, "IP", 0.0), rec.num(8, "IQ", 0.0), rec.num(9, "YP", 0.0),
+                       rec.num(10, "YQ", 0.0), rec.line)
 
     def _fixed_shunt(self, rec: _Record) -> None:
         bus, shunt_id = rec.int(0, "I"), rec.text(1)
@@ -316,7 +473,7 @@ class _RawParser:
     def _switched_shunt(self, rec: _Record) -> None:
         bus = rec.int(0, "I")
         rec.what = f"switched shunt at bus {bus}"
-        binit, status = {23: (5, None), 30: (7, None), 33: (9, 3)}[self.layout]
+        binit, status = _SWITCHED_SHUNT[self.layout]
         on = True if status is None else rec.int(status, "STAT", 1) != 0
         self._add_shunt(bus, "sw", on, 0.0, rec.num(binit, "BINIT", 0.0), rec.line)
 
@@ -324,7 +481,8 @@ class _RawParser:
         bus, gen_id = rec.int(0, "I"), rec.text(1)
         rec.what = f"generator at bus {bus} id '{gen_id}'"
         s = self.base_mva
-        mbase = rec.num(8, "MBASE", s)
+        at = _GENERATOR.get(self.layout, _GENERATOR_V33)
+        mbase = rec.num(at["mbase"], "MBASE", s)
         if mbase <= 0:
             self.notes.append(f"{self.source}:{rec.line}: {rec.what}: MBASE = {mbase:g}, "
                               f"using the system base {s:g} MVA")
@@ -335,25 +493,23 @@ class _RawParser:
             raise CaseError(f"{rec.what}: QT = {qt:g} Mvar < QB = {qb:g} Mvar: the reactive "
                             "limits need QB <= QT", self.source, rec.line)
         self.rows["generators"].append(dict(
-            bus=bus, gen_id=gen_id, in_service=rec.int(14, "STAT", 1) != 0,
+            bus=bus, gen_id=gen_id, in_service=rec.int(at["stat"], "STAT", 1) != 0,
             pg=rec.num(2, "PG", 0.0) / s, qg=rec.num(3, "QG", 0.0) / s,
             qmax=qt / s, qmin=qb / s,
             vset=rec.num(6, "VS", 1.0, VOLTAGE), reg_bus=reg if reg != 0 else bus, mbase=mbase,
-            zr=rec.num(9, "ZR", 0.0), zx=rec.num(10, "ZX", 1.0),
-            pmax=rec.num(16, "PT", 9999.0) / s, pmin=rec.num(17, "PB", -9999.0) / s,
+            zr=rec.num(at["zr"], "ZR", 0.0), zx=rec.num(at["zx"], "ZX", 1.0),
+            pmax=rec.num(at["pt"], "PT", 9999.0) / s, pmin=rec.num(at["pb"], "PB", -9999.0) / s,
             line=rec.line))
 
     def _branch(self, rec: _Record) -> None:
         i, j, ckt = rec.int(0, "I"), abs(rec.int(1, "J")), rec.text(2)
         rec.what = f"branch {i}-{j} ckt '{ckt}'"
+        ratio, angle = 0.0, 0.0
         if self.layout == 23:
             ratio, angle = rec.num(9, "RATIO", 0.0), rec.num(10, "ANGLE", 0.0)
             if ratio != 0:
                 self._check_ratio(rec, "RATIO", ratio)
-            gi, bi, gj, bj, st = 11, 12, 13, 14, 15
-        else:
-            ratio, angle = 0.0, 0.0
-            gi, bi, gj, bj, st = 9, 10, 11, 12, 13
+        gi, bi, gj, bj, st = _BRANCH_SHUNTS.get(self.layout, _BRANCH_SHUNTS_V30)
         self.rows["branches"].append(dict(
             from_bus=i, to_bus=j, ckt=ckt, in_service=rec.int(st, "ST", 1) != 0,
             r=rec.num(3, "R", 0.0), x=rec.num(4, "X"), b=rec.num(5, "B", 0.0),
@@ -361,6 +517,21 @@ class _RawParser:
             g_from=rec.num(gi, "GI", 0.0), b_from=rec.num(bi, "BI", 0.0),
             g_to=rec.num(gj, "GJ", 0.0), b_to=rec.num(bj, "BJ", 0.0),
             is_transformer=ratio != 0, line=rec.line))
+
+    def _switching_device(self, rec: _Record) -> None:
+        """A v34+ system switching device (I, J, CKT, X, 12 ratings, STAT, ...): a branch of
+        reactance X (default and floor THRSHZ, as PSS/E treats it), in service when closed."""
+        i, j, ckt = rec.int(0, "I"), abs(rec.int(1, "J")), rec.text(2)
+        rec.what = f"switching device {i}-{j} ckt '{ckt}'"
+        x = rec.num(3, "X", THRSHZ)
+        if abs(x) < THRSHZ:
+            self.notes.append(f"{self.source}:{rec.line}: {rec.what}: X = {x:g} p.u. is below "
+                              f"THRSHZ; using X = {THRSHZ:g} p.u.")
+            x = THRSHZ
+        self.rows["branches"].append(dict(
+            from_bus=i, to_bus=j, ckt=ckt, in_service=rec.int(16, "STAT", 1) != 0,
+            r=0.0, x=x, b=0.0, tap=1.0, shift=0.0, g_from=0.0, b_from=0.0, g_to=0.0,
+            b_to=0.0, is_transformer=False, line=rec.line))
 
     # -- transformers --------------------------------------------------------
     def _transformer(self, rec: _Record) -> None:
@@ -390,7 +561,8 @@ class _RawParser:
         ratios = [self._winding_ratio(w, cw, bus, n + 1) for n, (w, bus) in
                   enumerate(zip(windings, buses))]
         shifts = [math.radians(w.num(2, f"ANG{n + 1}", 0.0)) for n, w in enumerate(windings)]
-        if any(w.int(6, f"COD{n + 1}", 0) != 0 for n, w in enumerate(windings)):
+        cod = 15 if self.layout >= 34 else 6  # after 12 ratings (v34+) or 3 (v30-v33)
+        if any(w.int(cod, f"COD{n + 1}", 0) != 0 for n, w in enumerate(windings)):
             self.skipped["transformer tap control"] = self.skipped.get(
                 "transformer tap control", 0) + 1
         if not k:
@@ -407,11 +579,11 @@ class _RawParser:
         star = -self.star_count
         on = [status not in (0, 4), status not in (0, 2), status not in (0, 3)]
         for n, z in enumerate(star_z):
-            if abs(z) < 1e-4:  # PSS/E zero-impedance threshold THRSHZ
+            if abs(z) < THRSHZ:
                 self.notes.append(f"{self.source}:{rec.line}: {rec.what}: star impedance of "
                                   f"winding {n + 1} is {abs(z):.1e} p.u., below THRSHZ; "
                                   "using X = 1e-4 p.u.")
-        star_z = [z if abs(z) >= 1e-4 else 1e-4j for z in star_z]
+        star_z = [z if abs(z) >= THRSHZ else THRSHZ * 1j for z in star_z]
         vm, va = imp.num(9, "VMSTAR", 1.0), math.radians(imp.num(10, "ANSTAR", 0.0))
         if (vm, va) == (1.0, 0.0):  # PSS/E's default, not a solved value
             vm, va = self._star_voltage(buses, star_z, ratios, shifts)
@@ -521,13 +693,14 @@ def parse_raw(text: str, source: str = "<raw>", *, version: int | None = None,
 
 
 def raw_version(path: str | Path) -> int:
-    """The RAW version (23, 30-33) of a file, from its case identification record."""
+    """The RAW version (23, 30-35) of a file: its REV, else what its records imply."""
     path = Path(path)
     return _RawParser(path.read_text(encoding="utf-8", errors="replace"), str(path), None).version
 
 
 def read_raw(path: str | Path, *, version: int | None = None) -> Case:
-    """Read a PSS/E RAW file (v23, v30-v33) into a validated `Case`."""
+    """Read a PSS/E RAW file (v23, v30-v35) into a validated `Case`; `version` overrides the
+    file's REV (or its absence)."""
     path = Path(path)
     text = path.read_text(encoding="utf-8", errors="replace")
     return parse_raw(text, str(path), version=version, name=path.stem)

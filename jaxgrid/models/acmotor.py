@@ -60,7 +60,8 @@ import numpy as np
 
 from jaxgrid import vecmath
 from jaxgrid.models.base import (Array, Con, Initial, LoadModel, LoadSite, ModelError, Params,
-                                 States, device_label, surrogate_gradient, timer_fires)
+                                 Sentinel, States, device_label, surrogate_gradient,
+                                 timer_fires)
 from jaxgrid.models.options import MotorOptions
 
 VX_FLOOR = 0.3  # p.u.: lowest stall-jump voltage (spec §7 guard)
@@ -70,12 +71,15 @@ V_ANGLE_MIN = 0.1  # p.u.: below it the bus frequency measurement holds
 NO_DIP = 10.0  # p.u.: contactor memory "no dip seen" (a finite +inf)
 
 
-def _t(name, info):
-    return Con(name, "s", info, 0.0, 1e4)
+def _t(name, info, sentinel=None):
+    return Con(name, "s", info, 0.0, 1e4, sentinel=sentinel)
 
 
-def _v(name, info):
-    return Con(name, "p.u.", info, 0.0, 2.0)
+def _v(name, info, sentinel=None):
+    return Con(name, "p.u.", info, 0.0, 2.0, sentinel=sentinel)
+
+
+NO_RESTART = Sentinel("part B never restarts")
 
 
 def _f(name, info):
@@ -91,8 +95,9 @@ class Acmtblu1(LoadModel):
 
     name = "ACMTBLU1"
     cons = (
-        _t("tstall", "time below Vstall before the motors stall"),
-        _t("trst", "time above Vrst before part B restarts"),
+        _t("tstall", "time below Vstall before the motors stall",
+           Sentinel("the motors never stall")),
+        _t("trst", "time above Vrst before part B restarts", NO_RESTART),
         _t("tv", "voltage measurement lag"),
         _t("tf", "frequency measurement lag"),
         Con("complf", "p.u.", "compressor load factor P/Sm (<= 0 means 1)", -10.0, 10.0),
@@ -107,7 +112,7 @@ class Acmtblu1(LoadModel):
         _k("kq2", "running-2 Q coefficient"), _k("nq2", "running-2 Q exponent"),
         _v("vbrk", "breakdown voltage between running regions 1 and 2"),
         _f("frst", "fraction of motors that can restart (part B)"),
-        _v("vrst", "restart voltage"),
+        _v("vrst", "restart voltage", NO_RESTART),
         _k("cmpkpf", "P frequency sensitivity, p.u. P / p.u. f"),
         _k("cmpkqf", "Q frequency sensitivity, p.u. Q / p.u. f"),
         _v("vc1off", "contactors start to drop out below"),
@@ -115,11 +120,16 @@ class Acmtblu1(LoadModel):
         _v("vc1on", "all dropped contactors back in above"),
         _v("vc2on", "dropped contactors start to reclose above"),
         _t("tth", "winding thermal time constant"),
-        Con("th1t", "p.u.", "temperature where thermal tripping starts", -10.0, 100.0),
-        Con("th2t", "p.u.", "temperature where all motors are tripped", -10.0, 100.0),
+        Con("th1t", "p.u.", "temperature where thermal tripping starts", -10.0, 100.0,
+            sentinel=Sentinel("thermal tripping never starts")),
+        Con("th2t", "p.u.", "temperature where all motors are tripped", -10.0, 100.0,
+            sentinel=Sentinel("thermal tripping never completes (its ramp from TH1T ends "
+                              "there)")),
         _f("fuvr", "fraction of motors with under-voltage relays"),
-        _v("uvtr1", "UV relay stage-1 pickup"), _t("ttr1", "UV stage-1 time"),
-        _v("uvtr2", "UV relay stage-2 pickup"), _t("ttr2", "UV stage-2 time"),
+        _v("uvtr1", "UV relay stage-1 pickup"),
+        _t("ttr1", "UV stage-1 time", Sentinel("UV relay stage 1 never trips")),
+        _v("uvtr2", "UV relay stage-2 pickup"),
+        _t("ttr2", "UV stage-2 time", Sentinel("UV relay stage 2 never trips")),
     )
     states = ()
     flags = ("vm", "fm", "theta_a", "theta_b", "run_a", "run_b", "ts_a", "ts_b", "tr_b",

@@ -10,12 +10,13 @@ Every family declares its ports once, as PowerSimulationsDynamics.jl does
 (`src/base/ports.jl`): `ports(signals, k, flags)` picks what its units read from the
 model-wide `Signals` of one evaluation, `rates(p, x, ports) -> (output, dx)` gives the
 state derivatives and the signal it drives (`output` names the `Signals` field: EFD for
-exciters, Pm for governors; None for machines and loads). `jaxgrid.dynamics.derivatives`
+exciters, Pm for governors, VOTHSG for stabilizers; None for machines and loads). `jaxgrid.dynamics.derivatives`
 runs the families in causal order, each reading the signals the earlier ones wrote.
 Initialisation mirrors it: `init_ports(point, k, labels)` picks what the units start from
 out of the model-wide `StartPoint` (the power flow), `init(p, ports) -> Initial` gives
 their parameters, states and what they hand on; `jaxgrid.compile` runs the families in
-the order machines -> exciters -> governors -> loads (spec §0).
+the order machines -> exciters -> governors -> loads -> stabilizers (spec §0; a stabilizer's
+output is zero at rest, so the exciters' references do not depend on it).
 """
 from __future__ import annotations
 
@@ -45,11 +46,30 @@ class ModelError(ValueError):
     """Dynamic data that a model cannot use (names the file, line, device and field)."""
 
 
+SENTINELS = (999.0, 9999.0)  # the values WECC and PSS/E data use to switch a function off
+
+
+@dataclasses.dataclass(frozen=True)
+class Sentinel:
+    """How a CON reads the WECC/PSS/E values that switch its function off: 999 and 9999
+    (their negatives where the CON is a lower limit), where the model's comparison makes such
+    a value mean `meaning` (e.g. a reclose voltage of 999 p.u. is never exceeded: "never
+    recloses"). The table of every declaration is in docs/models.md ("Sentinel values")."""
+
+    meaning: str
+    lower: bool = False
+
+    @property
+    def values(self) -> tuple[float, ...]:
+        return tuple(-v if self.lower else v for v in SENTINELS)
+
+
 @dataclasses.dataclass(frozen=True)
 class Con:
     """One PSS/E CON: lower-case name, unit, meaning and allowed closed range [lo, hi].
 
-    `positive` excludes the lower bound 0 itself (time constants that divide).
+    `positive` excludes the lower bound 0 itself (time constants that divide). `sentinel`:
+    the WECC/PSS/E "off" values the CON also accepts, outside [lo, hi] too (`Sentinel`).
     """
 
     name: str
@@ -58,16 +78,35 @@ class Con:
     lo: float = -INF
     hi: float = INF
     positive: bool = False
+    sentinel: Sentinel | None = None
 
     def check(self, value: float) -> str | None:
         """A reason why `value` is not allowed, or None."""
         if not math.isfinite(value):
             return "must be finite"
+        if self.sentinel is not None and value in self.sentinel.values:
+            return None
         if self.positive and value <= 0:
             return "must be > 0"
         if not self.lo <= value <= self.hi:
             return f"must lie in [{self.lo}, {self.hi}]"
         return None
+
+    def admits(self, values: Array) -> Array:
+        """`check` on an array, jnp (run time: `jaxgrid.simulate.parameters_valid`): True
+        where the value is allowed (finiteness is checked separately)."""
+        ok = (values >= self.lo) & (values <= self.hi) & ((values > 0) | (not self.positive))
+        if self.sentinel is None:
+            return ok
+        return ok | jnp.isin(values, jnp.asarray(self.sentinel.values, values.dtype))
+
+    def sentinel_meaning(self, value: float) -> str | None:
+        """What `value` means when only its reading as a sentinel admits it (outside
+        [lo, hi]), else None (an ordinary value: a time of 9999 s within the range is
+        simply never reached)."""
+        if self.sentinel is None or value not in self.sentinel.values:
+            return None
+        return None if self.lo <= value <= self.hi else self.sentinel.meaning
 
 
 def device_label(record: DyrRecord) -> str:
@@ -87,6 +126,8 @@ class Signals(NamedTuple):
       dw: (n_gen,) speed deviations, p.u.
       efd: (n_gen,) field voltages, p.u. (EFD0 where no exciter drives them).
       pm: (n_gen,) mechanical powers, p.u. MBASE (Pm0 where no governor drives them).
+      vothsg: (n_gen,) stabilizer outputs VOTHSG, p.u., the exciters' VS input (0 where no
+        stabilizer drives them).
       v_load: (n_load,) load-slot voltages, network frame, complex p.u.
       omega_b: base angular frequency, rad/s (Python float).
     """
@@ -98,8 +139,14 @@ class Signals(NamedTuple):
     dw: Array
     efd: Array
     pm: Array
+    vothsg: Array
     v_load: Array
     omega_b: float
+
+    @property
+    def pe(self) -> Array:
+        """(n_gen,) electrical power at the machine terminals, Re(Vt·conj(I)), p.u. MBASE."""
+        return jnp.real(self.vt * jnp.conj(self.current))
 
 
 class LoadSite(NamedTuple):
@@ -150,10 +197,13 @@ class StartPoint(NamedTuple):
         before); i_dq 0 (unused); v_load empty (load slots are chosen after the load
         models start).
       site: `LoadSite` of every load record of the case (n_record,), without labels.
+      mbase: (n_gen,) the machines' MBASE, MVA (governors with a turbine rating of their
+        own, GGOV1's Trate, convert to it).
     """
 
     signals: Signals
     site: LoadSite
+    mbase: np.ndarray
 
 
 class Initial(NamedTuple):
@@ -164,7 +214,7 @@ class Initial(NamedTuple):
       states: {state: (n,)} at rest.
       output: what the units hand on: machines {efd, pm, xadifd} (`Signals` fields the
         later families start from), load models {s0: complex power drawn at the power flow,
-        p.u. system base}; empty for exciters and governors.
+        p.u. system base}; empty for exciters, governors and stabilizers.
       flags: {flag: (n,)} discrete states (load models; empty elsewhere).
       report: load-report lines naming the unit (load models; one per unit and per
         substituted CON value).
@@ -187,14 +237,16 @@ class DeviceModel:
     """Structure and contract shared by every device family.
 
     Subclasses set `name`, `cons` (PSS/E CON order), `states` and `n_icons` (integer
-    values written before the CONs, e.g. IEEEG1's JBUS and M). A family sets `output` (the
-    `Signals` field its rates drive, or None) and implements `ports` and `rates`.
+    values written before the CONs, e.g. IEEEG1's JBUS and M), of which the first
+    `len(stored_icons)` are kept as parameters under those names. A family sets `output`
+    (the `Signals` field its rates drive, or None) and implements `ports` and `rates`.
     """
 
     name: ClassVar[str]
     cons: ClassVar[tuple[Con, ...]]
     states: ClassVar[tuple[str, ...]]
     n_icons: ClassVar[int] = 0
+    stored_icons: ClassVar[tuple[str, ...]] = ()
     output: ClassVar[str | None] = None
 
     @classmethod
@@ -227,7 +279,8 @@ class DeviceModel:
 
     @classmethod
     def read(cls, records: Sequence[DyrRecord]) -> dict[str, np.ndarray]:
-        """CON arrays (n_unit,) float64 from DYR records, range-checked."""
+        """CON arrays (n_unit,) float64 from DYR records, range-checked, and the
+        `stored_icons`."""
         n = len(cls.cons) + cls.n_icons
         values = np.zeros((len(records), len(cls.cons)))
         for k, rec in enumerate(records):
@@ -242,11 +295,31 @@ class DeviceModel:
                                      f"= {value:g} {con.unit}: {reason}")
                 values[k, j] = value
         params = {con.name: values[:, j] for j, con in enumerate(cls.cons)}
+        params |= {name: np.array([float(r.cons[j]) for r in records])
+                   for j, name in enumerate(cls.stored_icons)}
         for k, rec in enumerate(records):
             reason = cls.check_combination({key: v[k] for key, v in params.items()})
             if reason:
                 raise ModelError(f"{device_label(rec)}: {reason}")
         return params
+
+    @classmethod
+    def sentinel_notes(cls, records: Sequence[DyrRecord]) -> list[str]:
+        """One build note per CON and value read as a sentinel (`Con.sentinel_meaning`),
+        naming the first record and counting the others."""
+        found: dict[tuple[int, float], list[DyrRecord]] = {}
+        for rec in records:
+            for j, (con, value) in enumerate(zip(cls.cons, rec.cons[cls.n_icons:])):
+                if con.sentinel_meaning(value):
+                    found.setdefault((j, value), []).append(rec)
+        notes = []
+        for (j, value), recs in found.items():
+            con = cls.cons[j]
+            more = f" (and {len(recs) - 1} more {cls.name} records)" if len(recs) > 1 else ""
+            notes.append(f"{device_label(recs[0])}{more}: CON({j + 1}) {con.name.upper()} = "
+                         f"{value:g} {con.unit} lies outside [{con.lo:g}, {con.hi:g}]: read as "
+                         f"the WECC/PSS/E sentinel: {con.sentinel_meaning(value)}")
+        return notes
 
     @classmethod
     def check_icons(cls, record: DyrRecord, icons: Sequence[float]) -> None:

@@ -27,9 +27,10 @@ case, and every CMLD becomes an ordinary load model with one load slot at its lo
 
 Components at the load bus (spec §4), one `LoadModel` unit per record:
   * motors A, B, C: states ma_epr ... mc_w, the `Cim5bl` derivative and stator current with
-    constants from Ls, Lp, Lpp, Tpo, Tppo through `induction.transient_constants` (same
-    stiff-stage rule: Tppo < MotorOptions.stiff_below drops the subtransient stage, Lpp :=
-    Lp) and the CIM5 load torque T0·ω^Etrq; two UV trip stages with reclose (§5);
+    the constants of the WECC motorw form (Ls, Lp, Lpp, Tpo, Tppo; induction-motors.md §6)
+    through its equivalent circuit (`induction.motorw_circuit`; same stiff-stage rule:
+    Tppo < MotorOptions.stiff_below drops the subtransient stage, Lpp := Lp) and the CIM5
+    load torque T0·ω^Etrq; two UV trip stages with reclose (§5);
   * motor D: the whole `Acmtblu1` (init, current, update) on its own parameters `d_*`;
   * electronic load with the deepest-dip memory and partial recovery Frcel (§4);
   * static load: exponential ZIP in V/V0 with frequency terms (§4);
@@ -45,10 +46,14 @@ switches). Each is the InterPSS reading where one is known, which reproduces the
      from the closed form of spec §6 step 1 whether or not LTC = 1; LTC = 1 itself is
      rejected (ModelError), since the direction of dynamic tap moves is unverified and
      Tdel = 30 s never acts within a 10-s FIDVR episode.
-  3. Motors A-C: the PSS/E-structured form (induction-motors.md §4) with Ll = 0.8·Lpp
-     (the WECC note on PSS/E's CMLD). With the WECC data (Tppo 2-3 ms) the stiff-stage rule
-     drops the subtransient stage, and then the §4 form and the motorw form of §6 are the
-     same third-order model, so the choice does not change results.
+  3. Motors A-C: the motorw form of induction-motors.md §6 (the WECC/PSLF description;
+     GridPACK, PowerWorld, Dynawo), integrated in the §4 states of the circuit with the same
+     impedance at every slip, which makes the same dynamics (`induction.motorw_circuit`).
+     Reading the data as §4 constants with Ll = 0.8·Lpp (a WECC note on PSS/E's CMLD,
+     [unverified]) gives another motor once the subtransient stage is kept (PNNL motor A:
+     initial slip 0.030 instead of 0.044). With the WECC data (Tppo 2-3 ms) the default
+     stiff-stage rule drops that stage; on the PNNL 300-bus study keeping it changes no
+     uncontrolled verdict at 1 ms (docs/models.md).
   4. Bf is solved with Bss given: the whole reactive balance at the load bus is closed by
      Bf, split Fb to the low side and 1 − Fb to the load bus (spec §6 steps 3-5, a secant
      root find; the issue asks for it). `compensation="static_q"` is InterPSS's reading

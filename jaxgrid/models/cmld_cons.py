@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 
 from jaxgrid.models.acmotor import Acmtblu1
-from jaxgrid.models.base import Con
+from jaxgrid.models.base import Con, Sentinel
 
 MOTORS = "abc"  # the three-phase motors A, B, C
 
@@ -23,7 +23,7 @@ def _frac(name, info):
 
 
 def _motor_block(x: str) -> tuple[Con, ...]:
-    """The 20 CONs of motor A, B or C (x = "a", "b", "c")."""
+    """The 20 CONs of motor A, B or C (x = "a", "b", "c"): 10 of the motor, 5 per trip stage."""
     m = x.upper()
     return (
         Con(f"mtyp{x}", "-", f"motor {m} type (3: three-phase)", 0.0, 10.0),
@@ -37,16 +37,23 @@ def _motor_block(x: str) -> tuple[Con, ...]:
         Con(f"tppo{x}", "s", f"motor {m} subtransient open-circuit time constant", 0.0, 100.0),
         Con(f"h{x}", "s", f"motor {m} inertia constant, motor base", 0.0, 100.0, positive=True),
         Con(f"etrq{x}", "-", f"motor {m} load-torque speed exponent", -10.0, 10.0),
-        _pu(f"vtr1{x}", f"motor {m} UV stage-1 trip voltage (0: off)", 0.0, 2.0),
-        Con(f"ttr1{x}", "s", f"motor {m} UV stage-1 trip time", 0.0, 1e6),
-        _frac(f"ftr1{x}", f"motor {m} fraction tripped by stage 1"),
-        _pu(f"vrc1{x}", f"motor {m} stage-1 reclose voltage", 0.0, 10.0),
-        Con(f"trc1{x}", "s", f"motor {m} stage-1 reclose time (~9999: none)", 0.0, 1e6),
-        _pu(f"vtr2{x}", f"motor {m} UV stage-2 trip voltage (0: off)", 0.0, 2.0),
-        Con(f"ttr2{x}", "s", f"motor {m} UV stage-2 trip time", 0.0, 1e6),
-        _frac(f"ftr2{x}", f"motor {m} fraction tripped by stage 2"),
-        _pu(f"vrc2{x}", f"motor {m} stage-2 reclose voltage", 0.0, 10.0),
-        Con(f"trc2{x}", "s", f"motor {m} stage-2 reclose time (~9999: none)", 0.0, 1e6),
+    ) + _trip_stage(x, "1") + _trip_stage(x, "2")
+
+
+def _trip_stage(x: str, k: str) -> tuple[Con, ...]:
+    """The 5 CONs of UV trip stage k of motor x: Vtr, Ttr, Ftr, Vrc, Trc (spec §5)."""
+    m = x.upper()
+    never_trips = Sentinel(f"motor {m}'s stage-{k} UV trip never acts")
+    never_recloses = Sentinel(f"motor {m}'s stage-{k} trip never recloses")
+    return (
+        _pu(f"vtr{k}{x}", f"motor {m} UV stage-{k} trip voltage (0: off)", 0.0, 2.0),
+        Con(f"ttr{k}{x}", "s", f"motor {m} UV stage-{k} trip time", 0.0, 1e6,
+            sentinel=never_trips),
+        _frac(f"ftr{k}{x}", f"motor {m} fraction tripped by stage {k}"),
+        Con(f"vrc{k}{x}", "p.u.", f"motor {m} stage-{k} reclose voltage", 0.0, 10.0,
+            sentinel=never_recloses),
+        Con(f"trc{k}{x}", "s", f"motor {m} stage-{k} reclose time", 0.0, 1e6,
+            sentinel=never_recloses),
     )
 
 

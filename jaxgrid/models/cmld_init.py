@@ -18,10 +18,11 @@ from jaxgrid.records import DyrRecord
 from jaxgrid.models.acmotor import NO_DIP, Acmtblu1
 from jaxgrid.models.base import Initial, LoadSite, ModelError, device_label
 from jaxgrid.models.cmld_cons import MOTOR_D_NAMES, MOTORS
-from jaxgrid.models.induction import Cim5bl, solve_slip, steady_state, transient_constants
+from jaxgrid.models.induction import (Cim5bl, motor_constants, motorw_circuit, solve_slip,
+                                      steady_state, transient_constants)
 from jaxgrid.models.options import CompositeOptions, MotorOptions
 
-LL_OVER_LPP = 0.8  # Ll = 0.8·Lpp (WECC note on PSS/E's CMLD, spec §8 question 3)
+LL_OVER_LPP = 0.8  # Ll/Lpp of the circuit realising motors A-C (any Ll < Lpp: the same motor)
 SECANT_STEPS = 60  # iterations of the Bf root find (converges in < 10)
 SECANT_TOL = 1e-13  # p.u. system base: reactive mismatch accepted at the load bus
 
@@ -158,11 +159,20 @@ def fractions(p: dict) -> dict[str, np.ndarray]:
 
 
 def _motor_constants(p: dict, m: str, omega_b, stiff_below: float) -> dict:
-    """Constants of motor m for the Cim5bl functions (p.u. on its base, s)."""
-    lpp = p[f"lpp{m}"]
-    c = transient_constants(p[f"ls{m}"], p[f"lp{m}"], lpp, LL_OVER_LPP * lpp, p[f"tpo{m}"],
-                            p[f"tppo{m}"], (lpp < p[f"lp{m}"]) & (p[f"tppo{m}"] > 0),
-                            stiff_below)
+    """Constants of motor m for the Cim5bl functions (p.u. on its base, s): the WECC motorw
+    form of spec §6 (Ls, Lp, Lpp, Tpo, Tppo), exactly, through its equivalent circuit
+    (`induction.motorw_circuit`, Ll = LL_OVER_LPP·Lpp); a subtransient stage with
+    Tppo < stiff_below (s) is dropped (Lpp := Lp, single cage, the same form)."""
+    ls, lp, lpp, tpo, tppo = (p[f"{k}{m}"] for k in ("ls", "lp", "lpp", "tpo", "tppo"))
+    double = (lpp < lp) & (tppo > 0) & (tppo >= stiff_below)
+    ll = LL_OVER_LPP * lpp
+    with np.errstate(divide="ignore", invalid="ignore"):
+        circuit = motorw_circuit(ls, lp, np.where(double, lpp, 0.5 * lp), tpo,
+                                 np.where(double, tppo, 1.0), np.where(double, ll, 0.4 * lp),
+                                 omega_b)
+    two = motor_constants(circuit, omega_b, stiff_below=0.0)
+    one = transient_constants(ls, lp, lp, ll, tpo, 0.0 * tpo, np.zeros(lp.shape, bool), 0.0)
+    c = {k: np.where(double, two[k], one[k]) for k in one}
     zero = np.zeros_like(lpp)
     return dict(c, ra=p[f"rs{m}"], omega_b=omega_b, sat_a=zero, sat_b=zero, h=p[f"h{m}"],
                 d=p[f"etrq{m}"])
@@ -233,6 +243,28 @@ def floor_steps(v_load, v_first: np.ndarray, scales: np.ndarray,
     return hi
 
 
+INTERPSS_LFMD = 0.85  # InterPSS's motor-D loading factor: its mapper leaves LFmD unread
+
+
+def interpss_cons(p: dict, no_ac: bool) -> dict:
+    """CON arrays (n,) as the InterPSS of the RLGC environments reads them (../shared/
+    reference/interpss-cmld.md): LFmD 0.85; motors A-C with load torque ∝ ω² and no UV
+    trips; the electronic and static loads one constant-impedance remainder (P and Q ∝ V²,
+    no frequency terms; its Q closes the balance, `initialise` with reading != "wecc");
+    no_ac: motors A-C in that remainder too. Motor D's curves are InterPSS's defaults, which
+    are the PNNL data's values."""
+    q = dict(p, lfmd=np.full_like(p["lfmd"], INTERPSS_LFMD), fel=0.0 * p["fel"],
+             p1e=2.0 + 0.0 * p["p1e"], p1c=1.0 + 0.0 * p["p1c"], p2c=0.0 * p["p2c"],
+             q1e=2.0 + 0.0 * p["q1e"], q1c=1.0 + 0.0 * p["q1c"], q2c=0.0 * p["q2c"],
+             pfrq=0.0 * p["pfrq"], qfrq=0.0 * p["qfrq"])
+    for m in MOTORS:
+        q.update({f"etrq{m}": 2.0 + 0.0 * p[f"etrq{m}"], f"vtr1{m}": 0.0 * p[f"vtr1{m}"],
+                  f"vtr2{m}": 0.0 * p[f"vtr2{m}"]})
+        if no_ac:
+            q[f"fm{m}"] = 0.0 * p[f"fm{m}"]
+    return q
+
+
 class _Substation(NamedTuple):
     """The substation transformer of n units at its initial tap (spec §6 step 1), arrays (n,):
     sbl (load MVA base), x_xf, tap, ratio (low side per system side), v_low, i_low (complex
@@ -248,6 +280,7 @@ class _Substation(NamedTuple):
 
 
 def _substation(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float) -> _Substation:
+    """The units' `_Substation` for the load record's power s (n,) at the voltage vs (n,)."""
     sbl = load_base(p, s.real, sbase)
     x_xf = p["xxf"] / sbl * p["tfixhs"] ** 2
     tap = initial_tap(p, s, np.abs(vs), x_xf)
@@ -336,6 +369,11 @@ def initialise(p: dict, s: np.ndarray, vs: np.ndarray, sbase: float, f_nom: floa
     """
     p = {k: np.asarray(v, dtype=float) for k, v in p.items()}
     notes: list[str] = []
+    if options.reading != "wecc":
+        p = interpss_cons(p, no_ac=options.reading == "interpss_no_ac")
+        options = dataclasses.replace(options, compensation="static_q")
+        notes.append(f"{len(labels)} composite load(s) read as InterPSS reads them "
+                     f"({options.reading}; cmld_init.interpss_cons)")
     n = s.shape[0]
     sub = _substation(p, s, vs, sbase)
     share = fractions(p)

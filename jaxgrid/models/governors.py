@@ -1,9 +1,11 @@
-"""Turbine-governors: TGOV1, IEEEG1, WSIEG1, GAST, IEESGO, HYGOV.
+"""Turbine-governors: TGOV1, IEEEG1, WSIEG1, GAST, IEESGO, HYGOV, GGOV1.
 
 CON orders, equations and initialisation follow `shared/specs/machines-exciters-governors.md`
-§9-§13 (PSS/E model library conventions). Every quantity is per unit on the machine base
-MBASE; the input is the machine's speed deviation Δω (p.u., positive = overspeed), the
-output its mechanical power Pm (p.u. MBASE); time constants in seconds.
+§9-§13 (PSS/E model library conventions); GGOV1, which the spec does not cover, is described
+in its class. Every quantity is per unit on the machine base MBASE (GGOV1: on its turbine
+rating, converted at its ports); the inputs are the machine's speed deviation Δω (p.u.,
+positive = overspeed) and electrical power, the output its mechanical power Pm (p.u. MBASE);
+time constants in seconds.
 
 Zero time constants bypass a lag (output = input, state held) where the structure allows;
 where a division remains the CON must be > 0 and such data are rejected when read.
@@ -18,9 +20,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxgrid.records import DyrRecord
-from jaxgrid.models.base import (Array, Con, DeviceModel, Initial, ModelError, Params, Signals,
-                                 StartPoint, States, device_label, freeze_at_limits, lag,
-                                 lead_lag_output, outside_limits)
+from jaxgrid.models.base import (LIMIT_TOL, Array, Con, DeviceModel, Initial, ModelError,
+                                 Params, Signals, StartPoint, States, device_label,
+                                 freeze_at_limits, lag, lead_lag_output, outside_limits, safe)
 
 # Smallest gate opening used in the HYGOV head h = (q/g)², p.u.: a closed gate with
 # flow is unphysical; the floor keeps h finite (and differentiable) if the gate closes.
@@ -33,6 +35,11 @@ K_SUM_TOL = 1e-6
 # (+1 above a maximum, -1 below a minimum), and the margin GridPACK moves them past it, p.u.
 WIDENED = (("pmax", 1), ("pmin", -1), ("uo", 1), ("uc", -1))
 WIDEN_MARGIN = 0.1
+
+# GGOV1's acceleration limiter is written with the simulation step DELT (PSS/E): fsra =
+# previous fsr + Ka·DELT·(Aset − acceleration). Here the previous fsr is a lag of this time
+# constant (OPAL-RT's default), s; Heun keeps that lag stable up to 20-ms steps.
+GGOV1_DELT = 0.01
 
 
 def _t(name: str, info: str, positive: bool = False) -> Con:
@@ -53,16 +60,24 @@ def _lag_output(x: Array, u: Array, t: Array) -> Array:
 
 
 class GovernorPorts(NamedTuple):
-    """What a governor reads from its machine: dw, the speed deviation Δω (n_gov,), p.u."""
+    """What a governor reads from its machine, arrays (n_gov,).
+
+    Attributes:
+      dw: speed deviation Δω, p.u.
+      pe: electrical power at the terminals, p.u. MBASE.
+    """
 
     dw: Array
+    pe: Array
 
 
 class GovernorStart(NamedTuple):
-    """What a governor starts from: pm, the mechanical power (n,) p.u. MBASE it holds at
-    rest."""
+    """What a governor starts from, arrays (n,): pm, the mechanical power p.u. MBASE it
+    holds at rest; pe, the electrical power p.u. MBASE; mbase, its machine's MBASE, MVA."""
 
     pm: Array
+    pe: Array
+    mbase: Array
 
 
 class GovernorModel(DeviceModel):
@@ -76,11 +91,12 @@ class GovernorModel(DeviceModel):
 
     @classmethod
     def ports(cls, signals: Signals, k: Array, flags: States) -> GovernorPorts:
-        return GovernorPorts(dw=signals.dw[k])
+        return GovernorPorts(dw=signals.dw[k], pe=signals.pe[k])
 
     @classmethod
     def init_ports(cls, point: StartPoint, k: Array, labels) -> GovernorStart:
-        return GovernorStart(pm=point.signals.pm[k])
+        return GovernorStart(pm=point.signals.pm[k], pe=point.signals.pe[k],
+                             mbase=jnp.asarray(point.mbase[k]))
 
     @classmethod
     def init(cls, p: Params, start: GovernorStart) -> Initial:
@@ -450,4 +466,199 @@ class Hygov(GovernorModel):
         return {"g": outside_limits(x["g"], p["gmin"], p["gmax"])}
 
 
-GOVERNORS = {m.name: m for m in (Tgov1, Ieeeg1, Wsieg1, Gast, Ieesgo, Hygov)}
+class Ggov1(GovernorModel):
+    """GE general governor-turbine GGOV1 as PSS/E has it (ICONs Rselect, Flag; CONs R,
+    Tpelec, maxerr, minerr, Kpgov, Kigov, Kdgov, Tdgov, Vmax, Vmin, Tact, Kturb, Wfnl, Tb,
+    Tc, Teng, Tfload, Kpload, Kiload, Ldref, Dm, Ropen, Rclose, Kimw, Aset, Ka, Ta, Trate,
+    db, Tsa, Tsb, Rup, Rdown: the order of PowerSystems.jl's, ANDES's and GridPACK's readers;
+    ANDES implements no GGOV1), the block diagram of IEEE PES-TR1 (2013) §4.2 as OPAL-RT's
+    PSS/E library realises it.
+
+    Quantities are per unit of the turbine rating Trate (MW; 0: MBASE): Pelec and Pmech are
+    converted by MBASE/Trate at the ports. Speed control: err = clip(deadband(Pref + Pmw −
+    Δω − R·Pelec_meas), minerr, maxerr) with Pelec_meas = Pelec/(1 + sTpelec) (Rselect 1;
+    Rselect 0: no droop feedback) and the supervisory load control Pmw = Kimw/s of
+    (Pmwset − Pelec_meas), non-windup within ±1.1·R; the PID fsrn = Kpgov·err +
+    Kdgov·s/(1 + sTdgov)·err + xi, whose integral tracks the low-value-select output fsr,
+    dxi/dt = Kigov/Kpgov·(fsr − xi) (GGOV1's anti-windup). Load limit: the fuel flow
+    wf = xact·(1 + Δω) (Flag 1) or xact (Flag 0), times (1 + Δω)^Dm where Dm < 0, through
+    (1 + sTsa)/(1 + sTsb) and 1/(1 + sTfload) gives the temperature; fsrt = min(xld +
+    Kpload·(Ldref/Kturb + Wfnl − temperature), 1) with dxld/dt = Kiload/Kpload·(fsr − xld).
+    Acceleration limit: fsra = m + Ka·DELT·(Aset − a) with a = s/(1 + sTa) of Δω and m the
+    previous fsr, here dm/dt = (fsr − m)/DELT (DELT = `GGOV1_DELT`). fsr = clip(min(fsrn,
+    fsrt, fsra), Vmin, Vmax) (fsra only where Ka > 0); the actuator dxact/dt =
+    clip((fsr − xact)/Tact, Rclose, Ropen); Pmech = (1 + sTc)/(1 + sTb) of Kturb·(wf − Wfnl),
+    less Dm·Δω where Dm > 0.
+
+    A unit the power flow loads beyond Kturb·(Vmax − Wfnl) gets the Kturb that puts its
+    initial stroke at Vmax, and one whose initial stroke lies below Vmin gets that stroke as
+    its Vmin, as GridPACK's GGOV1 does (the latter its option for initial limit
+    violations); each change is noted. Refused (ModelError naming the
+    record): Rselect −1 and −2 (the references disagree on
+    which of the valve stroke and the governor output each means), Teng != 0 (a transport
+    delay), Kpgov = 0 or Kpload = 0 (their integrals change form), Kdgov != 0 with
+    Tdgov = 0, Ka > 0 with Ta = 0 and the pure leads Tc != 0 with Tb = 0, Tsa != 0 with
+    Tsb = 0. Rup and Rdown limit the rate of change of the load reference Ldref, which is
+    constant here; they are read and have no effect. States: p_meas, x_mw, x_d, x_i, x_act,
+    x_turb, x_temp, x_load, x_ld, x_acc, x_fsr, p.u. of Trate.
+    """
+
+    name = "GGOV1"
+    n_icons = 2
+    stored_icons = ("rselect", "flag")
+    cons = (_pu("r", "permanent droop R", 0.0),
+            _t("tpelec", "electrical power transducer time constant (0: bypassed)"),
+            _pu("maxerr", "speed error upper limit"),
+            _pu("minerr", "speed error lower limit"),
+            _pu("kpgov", "governor proportional gain", 0.0, positive=True),
+            _pu("kigov", "governor integral gain (1/s)", 0.0),
+            _pu("kdgov", "governor derivative gain (s)", 0.0),
+            _t("tdgov", "governor derivative time constant"),
+            _pu("vmax", "fuel stroke upper limit"), _pu("vmin", "fuel stroke lower limit"),
+            _t("tact", "actuator time constant", positive=True),
+            _pu("kturb", "turbine gain", 0.0, positive=True),
+            _pu("wfnl", "no-load fuel flow", 0.0),
+            _t("tb", "turbine lag time constant (0: bypassed)"),
+            _t("tc", "turbine lead time constant"),
+            _t("teng", "transport delay of a diesel engine (only 0 is modelled)"),
+            _t("tfload", "load limiter time constant (0: bypassed)"),
+            _pu("kpload", "load limiter proportional gain", 0.0, positive=True),
+            _pu("kiload", "load limiter integral gain (1/s)", 0.0),
+            _pu("ldref", "load limiter reference"),
+            _pu("dm", "speed sensitivity: damping (> 0) or fuel-flow exponent (< 0)"),
+            Con("ropen", "p.u./s", "actuator opening rate limit", 0.0),
+            Con("rclose", "p.u./s", "actuator closing rate limit (<= 0)", hi=0.0),
+            Con("kimw", "1/s", "supervisory load controller gain", 0.0),
+            Con("aset", "p.u./s", "acceleration limiter setpoint"),
+            _pu("ka", "acceleration limiter gain (0: no acceleration limiter)", 0.0),
+            _t("ta", "acceleration limiter time constant"),
+            Con("trate", "MW", "turbine rating (0: MBASE)", 0.0),
+            _pu("db", "speed error deadband", 0.0),
+            _t("tsa", "temperature detection lead time constant"),
+            _t("tsb", "temperature detection lag time constant (0: bypassed)"),
+            Con("rup", "p.u./s", "load reference rate-of-increase limit (no effect here)"),
+            Con("rdown", "p.u./s", "load reference rate-of-decrease limit (no effect here)"))
+    states = ("p_meas", "x_mw", "x_d", "x_i", "x_act", "x_turb", "x_temp", "x_load", "x_ld",
+              "x_acc", "x_fsr")
+
+    @classmethod
+    def check_icons(cls, record, icons):
+        rselect, flag = icons
+        if rselect not in (0, 1):
+            raise ModelError(f"{device_label(record)}: ICON Rselect = {rselect:g}: supported 1 "
+                             "(electrical power) and 0 (no droop feedback); -1 and -2 are not "
+                             "modelled (the references disagree on which of the governor "
+                             "output and the valve stroke each selects)")
+        if flag not in (0, 1):
+            raise ModelError(f"{device_label(record)}: ICON Flag = {flag:g}: allowed 0 (fuel "
+                             "flow independent of speed), 1 (proportional to speed)")
+
+    @classmethod
+    def check_combination(cls, p):
+        if p["teng"] != 0:
+            return f"TENG = {p['teng']:g} s: the transport delay is not modelled (needs 0)"
+        for lead, lag_, gain in (("tc", "tb", None), ("tsa", "tsb", None),
+                                 (None, "tdgov", "kdgov"), (None, "ta", "ka")):
+            used = p[lead] if lead else p[gain]
+            if p[lag_] == 0 and used != 0:
+                name = (lead or gain).upper()
+                return (f"{lag_.upper()} = 0 with {name} = {used:g}: needs {lag_.upper()} > 0 "
+                        f"or {name} = 0")
+        for lo, hi in (("minerr", "maxerr"), ("vmin", "vmax")):
+            if p[lo] > p[hi]:
+                return f"needs {lo.upper()} <= {hi.upper()} ({p[lo]:g} > {p[hi]:g})"
+        return None
+
+    @classmethod
+    def signals(cls, p: Params, x: States, dw: Array) -> tuple[Array, Array]:
+        """(wf, the fuel flow; the temperature detector's input), p.u. of Trate."""
+        wf = x["x_act"] * jnp.where(p["flag"] == 1, 1.0 + dw, 1.0)
+        speed = jnp.maximum(1.0 + dw, 1e-3)  # (1 + Δω)^Dm, Dm < 0, kept finite
+        return wf, wf * jnp.where(p["dm"] < 0, speed ** jnp.minimum(p["dm"], 0.0), 1.0)
+
+    @classmethod
+    def init(cls, p, start):
+        ratio = jnp.where(p["trate"] > 0, start.mbase / safe(p["trate"]), 1.0)
+        pmech0, pelec0 = start.pm * ratio, start.pe * ratio
+        # GridPACK's rule: a unit loaded beyond Kturb·(Vmax − Wfnl) gets the Kturb that
+        # puts its initial stroke at Vmax
+        over = (pmech0 / p["kturb"] + p["wfnl"] > p["vmax"]) & (p["vmax"] > p["wfnl"])
+        p = dict(p, kturb_data=p["kturb"], kturb=jnp.where(
+            over, pmech0 / jnp.where(over, p["vmax"] - p["wfnl"], 1.0), p["kturb"]))
+        fsr0 = pmech0 / p["kturb"] + p["wfnl"]
+        p |= {"vmin_data": p["vmin"], "vmin": jnp.minimum(p["vmin"], fsr0)}  # GridPACK's option
+        zero = jnp.zeros_like(fsr0)
+        x = {"p_meas": pelec0, "x_mw": zero, "x_d": zero, "x_i": fsr0, "x_act": fsr0,
+             "x_turb": pmech0, "x_temp": fsr0, "x_load": fsr0, "x_ld": fsr0, "x_acc": zero,
+             "x_fsr": fsr0}
+        pref = jnp.where(p["rselect"] == 1, p["r"] * pelec0, 0.0)
+        return Initial(dict(p, ratio=ratio, pref=pref, pmwset=pelec0), x, {})
+
+    @classmethod
+    def rates(cls, p, x, ports):
+        dw = ports.dw
+        pelec = ports.pe * p["ratio"]
+        p_meas = jnp.where(p["tpelec"] > 0, x["p_meas"], pelec)
+        e = (p["pref"] + x["x_mw"] - dw
+             - jnp.where(p["rselect"] == 1, p["r"] * p_meas, 0.0))
+        err = jnp.clip(jnp.sign(e) * jnp.maximum(jnp.abs(e) - p["db"], 0.0),
+                       p["minerr"], p["maxerr"])
+        fsrn = (p["kpgov"] * err + p["kdgov"] / safe(p["tdgov"]) * (err - x["x_d"])
+                + x["x_i"])
+        wf, heat = cls.signals(p, x, dw)
+        temp = lead_lag_output(x["x_temp"], heat, p["tsa"], p["tsb"])
+        load = _lag_output(x["x_load"], temp, p["tfload"])
+        fsrt = jnp.minimum(x["x_ld"] + p["kpload"] * (p["ldref"] / p["kturb"] + p["wfnl"]
+                                                      - load), 1.0)
+        accel = (dw - x["x_acc"]) / safe(p["ta"])
+        fsra = jnp.where(p["ka"] > 0, x["x_fsr"] + p["ka"] * GGOV1_DELT * (p["aset"] - accel),
+                         jnp.inf)
+        fsr = jnp.clip(jnp.minimum(jnp.minimum(fsrn, fsrt), fsra), p["vmin"], p["vmax"])
+        tin = p["kturb"] * (wf - p["wfnl"])
+        pmech = (lead_lag_output(x["x_turb"], tin, p["tc"], p["tb"])
+                 - jnp.where(p["dm"] > 0, p["dm"] * dw, 0.0))
+        bound = 1.1 * p["r"]
+        dx = {"p_meas": lag(x["p_meas"], pelec, p["tpelec"]),
+              "x_mw": freeze_at_limits(p["kimw"] * (p["pmwset"] - p_meas), x["x_mw"],
+                                       -bound, bound),
+              "x_d": lag(x["x_d"], err, p["tdgov"]),
+              "x_i": p["kigov"] / p["kpgov"] * (fsr - x["x_i"]),
+              "x_act": jnp.clip((fsr - x["x_act"]) / p["tact"], p["rclose"], p["ropen"]),
+              "x_turb": lag(x["x_turb"], tin, p["tb"]),
+              "x_temp": lag(x["x_temp"], heat, p["tsb"]),
+              "x_load": lag(x["x_load"], temp, p["tfload"]),
+              "x_ld": p["kiload"] / p["kpload"] * (fsr - x["x_ld"]),
+              "x_acc": lag(x["x_acc"], dw, p["ta"]),
+              "x_fsr": (fsr - x["x_fsr"]) / GGOV1_DELT}
+        return pmech / p["ratio"], dx
+
+    @classmethod
+    def limits(cls, p):
+        return {"x_mw": (-1.1 * p["r"], 1.1 * p["r"])}
+
+    @classmethod
+    def notes(cls, p, labels=()):
+        if "kturb_data" not in p:  # CONs as read, before init
+            return []
+        out = []
+        for name, why in (("kturb", "loaded beyond Kturb·(Vmax − Wfnl) at the power flow: "
+                                    "its initial stroke put at Vmax"),
+                          ("vmin", "the initial stroke lies below VMIN")):
+            changed = np.flatnonzero(np.asarray(p[name]) != np.asarray(p[f"{name}_data"]))
+            out += [f"{labels[k] if labels else f'GGOV1 unit {k}'}: {why}: {name.upper()} = "
+                    f"{float(p[f'{name}_data'][k]):g} set to {float(p[name][k]):.5g} "
+                    "(GridPACK's rule)" for k in changed]
+        return out
+
+    @classmethod
+    def init_violations(cls, p, x):
+        """The fuel stroke fsr0 outside [Vmin, Vmax], and a load limit fsrt0 below it."""
+        fsr0 = x["x_act"]
+        fsrt0 = jnp.minimum(fsr0 + p["kpload"] * (p["ldref"] / p["kturb"] + p["wfnl"] - fsr0),
+                            1.0)
+        return super().init_violations(p, x) | {
+            "fsr": outside_limits(fsr0, p["vmin"], p["vmax"]),
+            "load_limit": fsrt0 < fsr0 - LIMIT_TOL}
+
+
+GOVERNORS = {m.name: m for m in (Tgov1, Ieeeg1, Wsieg1, Gast, Ieesgo, Hygov, Ggov1)}

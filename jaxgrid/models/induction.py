@@ -377,6 +377,36 @@ def motor_constants(p: dict, omega_b, stiff_below: float) -> dict[str, np.ndarra
     return transient_constants(xa + xm, lp, lpp, xa, tp0, tpp0, cage2, stiff_below)
 
 
+def motorw_circuit(ls, lp, lpp, tp0, tpp0, ll, omega_b) -> dict[str, np.ndarray]:
+    """The type-1 double-cage circuit (xa = Ll, xm, r1, x1, r2, x2; p.u., arrays (n,)) whose
+    impedance equals the WECC `motorw` form's at every slip (spec §6):
+
+        Z(s) = Rs + jL'' + j(L' − L'')/(1 + jωb·s·T''0) + j(Ls − L')/(1 + jωb·s·T'0).
+
+    With p = jωb·s, the rotor admittance 1/(Z − Rs − jLl) = 1/Xm + Σ_i (1/X_i)·p/(p + a_i)
+    (a_i = ωb·R_i/X_i) is the partial-fraction form of D(p)/N(p), D = (1 + pT'0)(1 + pT''0),
+    N = (L'' − Ll)·D + (Ls − L')(1 + pT''0) + (L' − L'')(1 + pT'0); its poles −a_i (the
+    roots of N, negative reals) and residues give the cages, the slower one as cage 1. The
+    §4 equations with this circuit's constants (`motor_constants`) have the same transfer
+    function as the motorw form, so, the slip rotation acting alike on every rotor state,
+    the same dynamics for any speed; Ll (< L'') only picks the realisation. Needs
+    Ll < L'' < L' < Ls and T'0, T''0 > 0.
+    """
+    t1, t2 = np.asarray(tp0, float), np.asarray(tpp0, float)
+    d1, d2, c0 = ls - lp, lp - lpp, lpp - ll
+    quad = c0 * t1 * t2
+    lin = c0 * (t1 + t2) + d1 * t2 + d2 * t1
+    const = c0 + d1 + d2
+    root = np.sqrt(lin ** 2 - 4.0 * quad * const)
+    cages = {}
+    for name, a in (("1", (lin - root) / (2.0 * quad)), ("2", (lin + root) / (2.0 * quad))):
+        d_at = (1.0 - a * t1) * (1.0 - a * t2)  # D(−a)
+        slope = -2.0 * quad * a + lin  # N'(−a)
+        x = -a * slope / d_at  # 1/residue
+        cages.update({f"x{name}": x, f"r{name}": a * x / omega_b})
+    return dict(xa=ll, xm=ls - ll, it=np.ones_like(t1), **cages)
+
+
 def transient_constants(ls, lp, lpp, ll, tp0, tpp0, cage2, stiff_below: float):
     """The §4 constants from reactances Ls, L', L'', Ll (p.u.) and T'0, T''0 (s), arrays (n,).
 

@@ -200,8 +200,10 @@ class Genrou(MachineModel):
     def check_combination(cls, p):
         if p["h"] <= 0:
             return f"H = {p['h']:g} s: must be > 0"
-        if not p["xl"] < p["xppd"] < p["xpd"] <= p["xd"]:
-            return (f"needs Xl < X''d < X'd <= Xd (Xl = {p['xl']:g}, X''d = {p['xppd']:g}, "
+        # Xl = X''d is allowed: ψ''d is then ψkd alone ((X''d − Xl)/(X'd − Xl) = 0), and no
+        # equation divides by X''d − Xl (ACTIVSg2000's GENSAL at bus 6215 has it)
+        if not p["xl"] <= p["xppd"] < p["xpd"] <= p["xd"]:
+            return (f"needs Xl <= X''d < X'd <= Xd (Xl = {p['xl']:g}, X''d = {p['xppd']:g}, "
                     f"X'd = {p['xpd']:g}, Xd = {p['xd']:g})")
         if not p["tppdo"] < p["tpdo"]:
             return "needs T''do < T'do"

@@ -15,6 +15,7 @@ VX_RULES = ("reference_running1", "spec_running2")
 EXTRA_VAR = ("load_end", "none")
 SHEDDING = ("end_use", "feeder")
 COMPENSATION = ("bf", "static_q")
+READINGS = ("wecc", "interpss", "interpss_no_ac")  # CompositeOptions.reading
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,6 +90,14 @@ class CompositeOptions:
         every component and the load-end compensation; "feeder": it scales the whole feeder
         (transformer, shunts, feeder and components) as seen from the system bus, which
         then gets a load slot too (`CmldFeederShed`).
+      reading: "wecc" (default): the record as the WECC description reads it; "interpss":
+        as the InterPSS of the RLGC environments reads it (../shared/reference/
+        interpss-cmld.md; `cmld_init.interpss_cons`): LFmD 0.85 (not mapped), motors A-C
+        with speed-squared load torque and no UV trips, the electronic and static loads one
+        constant-impedance remainder, no feeder compensation Bf (the remainder's Q closes the
+        balance, as `compensation="static_q"`, whatever `compensation` says);
+        "interpss_no_ac": that, with motors A-C in the remainder too (InterPSS builds from
+        June 2020 to May 2021, which include the RLGC 300-bus jars).
     """
 
     compensation: str = "bf"
@@ -96,6 +105,7 @@ class CompositeOptions:
     v_floor: float = 0.95
     floor_step: float = 0.01
     shedding: str = "end_use"
+    reading: str = "wecc"
 
     def __post_init__(self):
         if self.extra_var not in EXTRA_VAR:
@@ -105,6 +115,8 @@ class CompositeOptions:
                              f"{', '.join(COMPENSATION)}")
         if self.shedding not in SHEDDING:
             raise ValueError(f"shedding = {self.shedding!r}: allowed {', '.join(SHEDDING)}")
+        if self.reading not in READINGS:
+            raise ValueError(f"reading = {self.reading!r}: allowed {', '.join(READINGS)}")
         if not 0.0 <= self.v_floor < 1.5:
             raise ValueError(f"v_floor = {self.v_floor!r} p.u.: allowed [0, 1.5)")
         if not 0.0 < self.floor_step < 1.0:
