@@ -15,8 +15,14 @@ The file (TOML; paths relative to it):
     study = "../../studies/ieee39_pnnl.toml"
     flags = []                            # experiments.train flags (after --seeds/--iterations)
     why = "the paper's settings"          # one line for the table
+    [[rows]]
+    name = "published LSTM v5"
+    study = "../../studies/ieee39_pnnl.toml"
+    controller = "rlgc:../../../shared/reference/rlgc-policies/.../policy_plus500.npz"
+    why = "a network the study published, evaluated as is"
 
-Each row's seeds train as one program in a run folder named by the study and the training
+A row with a `controller` (an `experiments.evaluate` spec; a path after its prefix relative to
+the file) trains nothing: that controller is scored as one seed. Each row's seeds train as one program in a run folder named by the study and the training
 (`experiments.reproduce.runs.Runs`: a finished row is reused, an interrupted one resumes);
 every seed's final policy, no control and UVLS are evaluated on each task set in the row's
 own study (its environment binds every controller alike; evaluations are cached), and scored
@@ -41,17 +47,19 @@ from experiments.common.training import Choices, shaping
 from experiments.reproduce.runs import FULL, Runs, metrics_rows
 
 SPEC_KEYS = {"out", "seeds", "iterations", "task_sets", "rows"}
-ROW_KEYS = {"name", "study", "flags", "why"}
+ROW_KEYS = {"name", "study", "flags", "why", "controller"}
 
 
 @dataclasses.dataclass(frozen=True)
 class Row:
-    """One configuration: name, study file (absolute), experiments.train flags, why."""
+    """One configuration: name, study file (absolute), experiments.train flags, why; or a
+    fixed controller spec (its path absolute) evaluated instead of a training."""
 
     name: str
     study: str
     flags: tuple[str, ...]
     why: str
+    controller: str | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,7 +102,16 @@ def read_spec(path: str | Path) -> Spec:
         flags = row.get("flags", [])
         if not all(isinstance(f, str) for f in flags):
             raise ValueError(f"{where}.flags = {flags!r}: must be a list of strings")
-        rows.append(Row(row["name"], str(study), tuple(flags), row.get("why", "")))
+        controller = row.get("controller")
+        if controller is not None:
+            if not isinstance(controller, str) or flags:
+                raise ValueError(f"{where}.controller = {controller!r}: a controller spec "
+                                 "string, in a row without flags")
+            kind, sep, target = controller.partition(":")
+            if sep and kind in ("policy", "ppo", "rlgc"):
+                controller = f"{kind}:{(path.parent / target).resolve()}"
+        rows.append(Row(row["name"], str(study), tuple(flags), row.get("why", ""),
+                        controller))
     names = [r.name for r in rows]
     if len(set(names)) < len(names):
         raise ValueError(f"{path}: rows: a name used twice in {names}")
@@ -121,20 +138,23 @@ def run_row(spec: Spec, row: Row, train: bool, studies: dict) -> dict | None:
     if row.study not in studies:
         studies[row.study] = Runs(row.study, spec.out / Path(row.study).stem, FULL)
     runs = studies[row.study]
-    chosen = choices(spec, row)
-    folder = runs.choices_folder(f"pars_{row.name}", chosen)
-    finished = metrics_rows(folder / "metrics.jsonl")
-    if not train and not (finished and finished[-1]["iteration"] >= chosen.iterations):
-        return None
-    runs.trained(folder, chosen)
-    record = {"folder": str(folder.relative_to(spec.out))}
+    folder = None
+    if row.controller is not None:
+        controllers = [row.controller]
+    else:
+        chosen = choices(spec, row)
+        folder = runs.choices_folder(f"pars_{row.name}", chosen)
+        finished = metrics_rows(folder / "metrics.jsonl")
+        if not train and not (finished and finished[-1]["iteration"] >= chosen.iterations):
+            return None
+        runs.trained(folder, chosen)
+        controllers = [f"policy:{folder / 'policy' / f'seed{i}'}" for i in range(spec.seeds)]
+    record = {"folder": str(folder.relative_to(spec.out)) if folder else None}
     for task_set in spec.task_sets:
         none, uvls = runs.evaluation("none", task_set), runs.evaluation("uvls", task_set)
         record[task_set] = {
             "uvls": scores(none, uvls, uvls),
-            "seeds": [scores(none, uvls, runs.evaluation(
-                f"policy:{folder / 'policy' / f'seed{i}'}", task_set))
-                for i in range(spec.seeds)]}
+            "seeds": [scores(none, uvls, runs.evaluation(c, task_set)) for c in controllers]}
     return record
 
 
@@ -146,7 +166,8 @@ def table(spec: Spec, results: dict) -> str:
              "Per task set: *need* = tasks no control fails, *ok* = tasks it recovers. "
              "wins: reward above UVLS's on need tasks; rec.: need tasks recovered (UVLS's in "
              "brackets); sheds on: ok tasks with >= 1 MW shed; MW: shed per task of the kind. "
-             "Mean over seeds, range in brackets; targets: seeds meeting all three "
+             "Mean over seeds, range in brackets (a controller row: its one value); "
+             "targets: seeds meeting all three "
              "(wins >= 95 %, rec. >= UVLS, sheds on <= 5 % of ok).", ""]
     for task_set in spec.task_sets:
         first = next((r[task_set] for r in results.values() if r), None)
@@ -179,6 +200,8 @@ def table(spec: Spec, results: dict) -> str:
 
 def _cell(values: list[float], fmt: str) -> str:
     low, high = min(values), max(values)
+    if len(values) == 1:
+        return fmt.format(low)
     return f"{fmt.format(np.mean(values))} [{fmt.format(low)}, {fmt.format(high)}]"
 
 

@@ -43,7 +43,7 @@ from jaxgrid import network
 from jaxgrid.case import VOLTAGE
 from jaxgrid.checks import InputError, Range, check_int, check_listed
 from jaxgrid.grid import GridModel, GridState
-from jaxgrid.recovery import envelope, mask_allows, normal_operation
+from jaxgrid.recovery import envelope, mask_allows, normal_operation, supervision_allows
 from jaxgrid.simulate import Bounds, Health, Task, advance, bus_voltage_sets, initial_health
 from jaxgrid.steppers import Solver, clip_closed, shed
 
@@ -111,7 +111,7 @@ EPISODE = Range(0.0, 3600.0, "s", lo_open=True)
 HISTORY = Range(1, 1000, "observations")
 OBS_INTERVAL = Range(0.0, 60.0, "s", lo_open=True)
 ACTION_DEADBAND = Range(0.0, 1.0, "of the initial load per step")
-ACTION_MASKS = ("none", "hadrec")  # EnvConfig.action_mask
+ACTION_MASKS = ("none", "hadrec", "undervoltage")  # EnvConfig.action_mask
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,8 +139,10 @@ class EnvConfig:
       action_mask: "none" (every request is applied: the paper's Java environment, RLGC) or
         "hadrec" (its authors' GridPACK environment: a request at an action bus in normal
         operation, or in the first 0.15 s after clearing, is dropped: `jaxgrid.recovery.
-        mask_allows` on the bus voltage at the request). [choice]; default "none", the paper's.
-        The mask is the environment's, so it binds every controller alike.
+        mask_allows` on the bus voltage at the request) or "undervoltage" (not the study's:
+        a request at an action bus at or above the recovery level after clearing is dropped,
+        `jaxgrid.recovery.supervision_allows`). [choice]; default "none", the paper's. The
+        mask is the environment's, so it binds every controller alike.
       recovery_buses: the observed buses the recovery check covers (None: all of them).
       bounds: divergence bounds of the simulation.
     """
@@ -419,6 +421,9 @@ class LoadSheddingEnv:
         if cfg.action_mask == "hadrec":
             request = jnp.where(mask_allows(state.action_vm, t - task.fault_end, jnp),
                                 request, 0.0)
+        elif cfg.action_mask == "undervoltage":
+            request = jnp.where(supervision_allows(state.action_vm, t - task.fault_end,
+                                                   params.recovery_level, jnp), request, 0.0)
         amount = jnp.minimum(request, left)
         x = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
         fault = self._fault(grid, task)

@@ -10,6 +10,11 @@ authors' GridPACK environment reads it to mask actions (pnnl/HADREC,
 `GridPackPowerDynSimEnvDef_v10.py`): after clearing, the bus voltage at or above the level the
 envelope asks next, 0.8 p.u. over (0, 0.33] s, 0.9 over (0.33, 0.5] and 0.95 after 0.5 s. That
 environment also holds every request for the first 0.15 s after clearing (`MASK_HOLD`).
+
+Undervoltage supervision (`supervision_allows`, not the study's) arms a bus's shedding only
+while its voltage is below a level after clearing, as an undervoltage-supervised special
+protection scheme does; with the recovery level (0.95 p.u.) it drops a request at a bus that
+has already recovered.
 """
 from __future__ import annotations
 
@@ -48,3 +53,10 @@ def mask_allows(vm, t_after_clearing, xp=np):
     shed (not in normal operation and at least `MASK_HOLD` after clearing)."""
     t = xp.asarray(t_after_clearing)
     return (t >= MASK_HOLD) & ~normal_operation(vm, t, xp)
+
+
+def supervision_allows(vm, t_after_clearing, level, xp=np):
+    """Bool, broadcast of vm (p.u.) and t_after_clearing (s): undervoltage supervision lets the
+    bus shed unless it is at or above `level` (p.u.) after clearing (at and before clearing
+    it leaves requests alone: the pre-fault penalty covers requests before the fault)."""
+    return ~((xp.asarray(t_after_clearing) > 0) & (vm >= level))

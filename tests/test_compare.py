@@ -107,10 +107,13 @@ def test_ablation_file_rows_and_table(tmp_path):
         'out = "out"\nseeds = 2\niterations = 7\ntask_sets = ["test"]\n'
         '[[rows]]\nname = "paper"\nstudy = "study.toml"\n'
         '[[rows]]\nname = "shaped"\nstudy = "study.toml"\n'
-        'flags = ["--shaping", "c_normal=30", "--iterations", "9"]\nwhy = "charge"\n')
+        'flags = ["--shaping", "c_normal=30", "--iterations", "9"]\nwhy = "charge"\n'
+        '[[rows]]\nname = "fixed"\nstudy = "study.toml"\ncontroller = "rlgc:nets/v5.npz"\n')
     spec = read_spec(spec_file)
-    assert spec.out == tmp_path / "out" and [r.name for r in spec.rows] == ["paper", "shaped"]
-    paper, shaped = (choices(spec, row) for row in spec.rows)
+    assert spec.out == tmp_path / "out"
+    assert [r.name for r in spec.rows] == ["paper", "shaped", "fixed"]
+    assert spec.rows[2].controller == f"rlgc:{tmp_path / 'nets' / 'v5.npz'}"  # beside the file
+    paper, shaped = (choices(spec, row) for row in spec.rows[:2])
     assert (paper.seeds, paper.iterations, paper.shaping) == (2, 7, ())
     assert (shaped.iterations, shaped.shaping) == (9, (("c_normal", 30.0),))
     record = {"n_tasks": 5, "need": 3, "wins": 3, "recovered": 2, "uvls_recovered": 1,
@@ -127,7 +130,10 @@ def test_ablation_file_rows_and_table(tmp_path):
                            r"rows\[0\].study = 'none.toml': no such file"),
                           ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
                            'rows = [{name = "a", study = "study.toml"}, '
-                           '{name = "a", study = "study.toml"}]\n', r"a name used twice")):
+                           '{name = "a", study = "study.toml"}]\n', r"a name used twice"),
+                          ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
+                           'rows = [{name = "a", study = "study.toml", controller = "uvls", '
+                           'flags = ["--seeds", "2"]}]\n', r"rows\[0\].controller = 'uvls'")):
         spec_file.write_text(body)
         with pytest.raises(ValueError, match=message):
             read_spec(spec_file)

@@ -16,7 +16,7 @@ import pytest
 
 from jaxgrid.env import (EnvParams, envelope_deviation, invalid_requests, normal_requests,
                          prefault_requests, recovery_failed, shed_power)
-from jaxgrid.recovery import mask_allows, normal_operation
+from jaxgrid.recovery import mask_allows, normal_operation, supervision_allows
 from jaxgrid.episode import play_tasks
 from jaxgrid.simulate import FaultEvent, make_task, stack_tasks
 from jaxgrid.study import builtin
@@ -59,6 +59,8 @@ def test_normal_operation_and_the_mask_by_hand(t_after, normal, allowed):
     assert normal_operation(vm, t_after).tolist() == normal
     assert np.asarray(normal_operation(jnp.asarray(vm), t_after, jnp)).tolist() == normal
     assert mask_allows(vm, t_after).tolist() == allowed
+    # undervoltage supervision at 0.9 p.u.: the 0.93-p.u. bus held after clearing only
+    assert supervision_allows(vm, t_after, 0.9).tolist() == [t_after <= 0, True, True]
     request = jnp.array([0.2, 0.0, 0.1])
     assert int(normal_requests(request, jnp.asarray(vm), t_after)) == normal[0] + normal[2]
 
@@ -130,13 +132,15 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
                                                                                 tasks):
     """With action_mask "hadrec" a request at a bus in normal operation is dropped (nothing
     shed, nothing charged for shedding), one at a low bus is applied, and c_normal charges
-    each request in normal operation whether the mask drops it or not. The agent step at
-    1.3 s is 0.22 s after the bus-4 0.08-s fault clears: the 0.8-p.u. level, past the hold;
-    the bus voltages of the newest observation are set by hand (0.95, 0.7, 0.95 p.u.)."""
+    each request in normal operation whether the mask drops it or not; "undervoltage" drops
+    the request at the bus at the 0.95-p.u. recovery level alike, but not in the hold. The
+    agent step at 1.3 s is 0.22 s after the bus-4 0.08-s fault clears: the 0.8-p.u. level,
+    past the hold; the bus voltages of the newest observation are set by hand (0.95, 0.7,
+    0.95 p.u.)."""
     request = jnp.array([-0.2, -0.2, 0.0])
     p0 = np.asarray(grid.load_p0)
     out, steps = {}, {}
-    for mask in ("none", "hadrec"):
+    for mask in ("none", "hadrec", "undervoltage"):
         env = study.env(action_mask=mask)
         steps[mask] = step = jax.jit(env.step)
         _, start = env.reset(None, tasks[2], EnvParams(), grid)
@@ -148,8 +152,9 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
                                    np.asarray(new.grid.load_left[env.action_slots]))
     shed_507 = 0.2 * p0[study.env().action_slots[1]]
     shed_both = shed_507 + 0.2 * p0[study.env().action_slots[0]]
-    assert out["hadrec", 0.0][1] == pytest.approx(shed_507, rel=1e-6)
-    assert out["hadrec", 0.0][2] == pytest.approx([1.0, 0.8, 1.0])
+    for mask in ("hadrec", "undervoltage"):
+        assert out[mask, 0.0][1] == pytest.approx(shed_507, rel=1e-6)
+        assert out[mask, 0.0][2] == pytest.approx([1.0, 0.8, 1.0])
     assert out["none", 0.0][1] == pytest.approx(shed_both, rel=1e-6)
     assert out["none", 0.0][2] == pytest.approx([0.8, 0.8, 1.0])
     for mask in ("none", "hadrec"):  # one request (at 504) in normal operation: c_normal once
@@ -158,6 +163,8 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
     _, new, _, _, info = steps["hadrec"](held, request, EnvParams(c_normal=3.0), grid)
     # 0.02 s after clearing: held
     assert float(info["shed_pu"]) == 0.0
+    _, _, _, _, info = steps["undervoltage"](held, request, EnvParams(c_normal=3.0), grid)
+    assert float(info["shed_pu"]) == pytest.approx(shed_both, rel=1e-6)  # below 0.95: applied
     assert np.asarray(new.action_vm).shape == (3,)
 
 
