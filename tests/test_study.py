@@ -516,14 +516,18 @@ def test_a_study_at_another_raw_file_keeps_its_settings(pnnl39, shared_cases, tm
 
 
 def test_committed_policy_runs_on_the_study_file_at_another_load_level(shared_cases):
-    """`experiments.evaluate --study studies/ieee39_pnnl.toml --raw PERC90.raw --controller
-    policy:results/pnnl39/policy`: the paper's settings (action range, LSTM history 1) at a
-    load level; the generalisation set, which indexed the 12 load levels, and the test set
-    both run at the one point, and the committed policy's layout is this study's."""
+    """`experiments.evaluate --study studies/ieee39_pnnl_mask.toml --raw PERC90.raw
+    --controller policy:results/pnnl39/policy` (the study the committed policy is evaluated
+    on, README): the paper's settings (action range, LSTM history 1) and HADREC's mask, from
+    its base file, at a load level; the generalisation set, which indexed the 12 load levels,
+    and the test set both run at the one point, and the committed policy's layout is this
+    study's."""
     from baselines.controllers import load
 
-    study = read_study(REPO / "studies" / "ieee39_pnnl.toml", raw=[shared_cases / POINTS[1]])
+    study = read_study(REPO / "studies" / "ieee39_pnnl_mask.toml",
+                       raw=[shared_cases / POINTS[1]])
     assert (study.params.action_low, study.history("lstm")) == (-0.2, 1)
+    assert study.config.action_mask == "hadrec"
     assert len(study.tasks("test")) == 120 and len(study.tasks("generalisation")) == 120
     controller = load(f"policy:{REPO / 'results/pnnl39/policy'}", study)
     env = controller.env
