@@ -14,6 +14,7 @@ the processes the tests start inherit them.
 import atexit
 import os
 import shutil
+import tarfile
 import tempfile
 
 _flags = [flag for flag in os.environ.get("XLA_FLAGS", "").split()
@@ -106,17 +107,30 @@ def shared_cases() -> Path:
     return SHARED_CASES
 
 
-def gridpack_data_sets() -> Path | None:
-    """GridPACK's data sets (`src/applications/data_sets` of its source tree, the tarball
-    ../shared/reference/gridpack/gridpack-src.tar.gz unpacked): under $GRIDPACK_SRC, else
-    $GRIDPACK_HOME/gridpack (default /opt/gridpack/gridpack); None when absent."""
+GRIDPACK_TARBALL = SHARED_CASES.parent / "reference" / "gridpack" / "gridpack-src.tar.gz"
+DATA_SETS = "src/applications/data_sets"
+
+
+@pytest.fixture(scope="session")
+def gridpack_data() -> Path:
+    """GridPACK's data sets (`src/applications/data_sets` of its source tree): under
+    $GRIDPACK_SRC or $GRIDPACK_HOME/gridpack (default /opt/gridpack/gridpack), else unpacked
+    once per test process from ../shared/reference/gridpack/gridpack-src.tar.gz into a
+    temporary folder (its data-set files, 9.5 MB); an error, not a skip, when neither is
+    there (the tests need ../shared, as for the PNNL cases)."""
     roots = [os.environ.get("GRIDPACK_SRC"),
              str(Path(os.environ.get("GRIDPACK_HOME", "/opt/gridpack")) / "gridpack")]
     for root in filter(None, roots):
-        folder = Path(root) / "src" / "applications" / "data_sets"
+        folder = Path(root) / DATA_SETS
         if folder.is_dir():
             return folder
-    return None
+    target = Path(tempfile.mkdtemp(prefix="jaxgrid-tests-gridpack-"))
+    atexit.register(shutil.rmtree, target, True)
+    with tarfile.open(GRIDPACK_TARBALL) as tar:
+        members = [m for m in tar.getmembers() if f"/{DATA_SETS}/" in f"/{m.name}"]
+        tar.extractall(target, members=members, filter="data")
+    (top,) = {m.name.split(f"/{DATA_SETS}/")[0] for m in members if m.isfile()}
+    return target / top / DATA_SETS
 
 
 # The files that take longest (measured with --durations), longest first: `make test` hands

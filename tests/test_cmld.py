@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from conftest import gridpack_data_sets, raw_v33
+from conftest import raw_v33
 from jaxgrid import network
 from jaxgrid.compile import CompileOptions, InitWarning, ModelWarning, compile_model
 from jaxgrid.dynamics import derivatives, load_injection, solve_network, update_loads
@@ -615,22 +615,19 @@ GRIDPACK_CMLD = ("raw/300bus_v23_no0imp_pslf.raw", "dyr/300bus_detail_model_cmpl
 FLAT_TOL = 1e-5  # p.u. in 0.5 s: float32 round-off is ~2e-7 here; a device off rest moves more
 
 
-@pytest.mark.skipif(gridpack_data_sets() is None, reason="GridPACK's source tree not found: "
-                    "unpack ../shared/reference/gridpack/gridpack-src.tar.gz, set GRIDPACK_SRC")
-def test_gridpack_composite_load_case_runs_strict():
+def test_gridpack_composite_load_case_runs_strict(gridpack_data):
     """GridPACK's 300-bus case with 6 CMLDBLU1 (motors A and D), 62 GENSAL + ESST1A + WSIEG1:
     compiled strict (its reclose voltages of 999 and 9999 read as sentinels, one note each),
     at rest until a 0.08-s fault at bus 43 at 0.5 s, which runs without divergence and leaves
     that composite load's bus depressed at 1 s (its motor D stalls)."""
     from jaxgrid.simulate import FaultEvent, simulate
 
-    data = gridpack_data_sets()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RawWarning)  # transformer adjustment, two-terminal dc
-        case = read_raw(data / GRIDPACK_CMLD[0])
+        case = read_raw(gridpack_data / GRIDPACK_CMLD[0])
         warnings.simplefilter("ignore", ModelWarning)  # WSIEG1 limits widened: GridPACK's rule
         warnings.simplefilter("error", InitWarning)
-        model = compile_model(case, read_dyr(data / GRIDPACK_CMLD[1]))
+        model = compile_model(case, read_dyr(gridpack_data / GRIDPACK_CMLD[1]))
     sentinel = [n.split(": ", 2)[2] for n in model.notes if "WECC/PSS/E sentinel" in n]
     assert [n.split(" = ")[0] for n in sentinel] == [
         f"CON({j}) {name}" for j, name in ((51, "VRC1A"), (56, "VRC2A"), (71, "VRC1B"),

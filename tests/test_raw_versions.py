@@ -4,9 +4,9 @@ that ends after its last non-empty section (`jaxgrid.io.raw`).
 One small network is written here in the v33, v34 and v35 layouts (field positions from the
 PSS/E POM as GridPACK's PTI33/34/35 parsers and powsybl's v35 records read them); every
 layout must give the same tables. The real files are GridPACK's (its source tarball
-../shared/reference/gridpack/gridpack-src.tar.gz unpacked, `conftest.gridpack_data_sets`):
+../shared/reference/gridpack/gridpack-src.tar.gz, `conftest.gridpack_data`):
 the WECC 240-bus v34 case, the Texas 2000-bus v33 case without REV and the 9-bus v23 case
-that ends before its FACTS section; those tests skip when the tree is absent.
+that ends before its FACTS section.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import gridpack_data_sets, stored_mismatch
+from conftest import stored_mismatch
 from jaxgrid.case import CaseError
 from jaxgrid.io.raw import parse_raw, raw_version, read_raw
 from jaxgrid.powerflow import solve
@@ -212,10 +212,6 @@ def test_file_ending_after_its_last_section(cut, where, v33):
 # GridPACK's files
 # --------------------------------------------------------------------------- #
 
-DATA = gridpack_data_sets()
-needs_gridpack = pytest.mark.skipif(
-    DATA is None, reason="GridPACK's source tree not found: unpack "
-    "../shared/reference/gridpack/gridpack-src.tar.gz and set GRIDPACK_SRC to its gridpack/")
 # Stored solutions: VM with 5 decimals, VA with 4 (1.7e-6 rad); over the smallest series
 # impedance of these files (X = 1e-4 p.u.) that rounding moves a branch flow by up to
 # ~(5e-6 + 1.7e-6)/1e-4 = 0.07 p.u., so a stored solution "satisfies" the data to 0.1 p.u.
@@ -223,15 +219,14 @@ STORED_MISMATCH = 0.1
 VM_TOL_STORED = 1e-3  # p.u.: PSS/E's default mismatch tolerance (test_powerflow)
 
 
-@needs_gridpack
 @pytest.mark.filterwarnings("ignore::jaxgrid.io.raw.RawWarning")  # tap control, as v33
-def test_wecc240_v34():
+def test_wecc240_v34(gridpack_data):
     """The v34 WECC 240-bus case: its stored solution satisfies our reading of every branch,
     transformer, shunt and generator (0.1 p.u., rounding) except at the four buses whose
     loads were raised by 500 MW + 100 Mvar after it was solved (there the mismatch is
     exactly that load); the power flow converges."""
-    case = read_raw(DATA / "raw" / "240busWECC_2018_PSS_fixedshunt.raw")
-    assert raw_version(DATA / "raw" / "240busWECC_2018_PSS_fixedshunt.raw") == 34
+    case = read_raw(gridpack_data / "raw" / "240busWECC_2018_PSS_fixedshunt.raw")
+    assert raw_version(gridpack_data / "raw" / "240busWECC_2018_PSS_fixedshunt.raw") == 34
     assert case.n_bus == 243  # 240 buses and three star points
     mismatch = stored_mismatch(case)
     stale = case.bus_index([1002, 1003, 1004, 1101])
@@ -241,22 +236,20 @@ def test_wecc240_v34():
     assert solve(case).converged
 
 
-@needs_gridpack
 @pytest.mark.filterwarnings("ignore::jaxgrid.io.raw.RawWarning")  # inter-area transfer
-def test_texas2000_without_rev_reads_as_v33():
+def test_texas2000_without_rev_reads_as_v33(gridpack_data):
     """dsa/case_ACTIVSg2000_1.raw: no REV, blank titles. Read as v33 from its bus records,
     its buses, loads, shunts and generators parse; it is then refused, rightly, for
     repeating circuit 'BL' of branch 1001-1064 (two identical records)."""
-    path = DATA / "dsa" / "case_ACTIVSg2000_1.raw"
+    path = gridpack_data / "dsa" / "case_ACTIVSg2000_1.raw"
     assert raw_version(path) == 33
     with pytest.raises(CaseError, match=r"case_ACTIVSg2000_1\.raw:3827: branch 1001-1064 "
                                         r"ckt 'BL': duplicate branch"):
         read_raw(path)
 
 
-@needs_gridpack
-def test_9b3g_ends_before_facts():
-    path = DATA / "raw" / "9b3g.raw"
+def test_9b3g_ends_before_facts(gridpack_data):
+    path = gridpack_data / "raw" / "9b3g.raw"
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # nothing skipped
         case = read_raw(path)
