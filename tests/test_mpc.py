@@ -68,33 +68,37 @@ def stalled_case(study32):
     return env, state, grid
 
 
-def test_one_decision_beats_no_shedding(study32, stalled_case):
+@pytest.fixture(scope="module")
+def decision(study32, stalled_case):
+    """One MPC decision from the stalled state, as the controller makes it (its 10-ms
+    prediction model, the default options), compiled once for any surrogate:
+    surrogate widths (V, t) -> (best plan, its predicted return, no shedding's)."""
     env, state, grid = stalled_case
     options = MpcOptions()
     planner, mpc, zeros = mpc_controller(env, options)
+    decide_with = jax.jit(lambda g: decide(planner.prediction, options.iterations,
+                                           jnp.asarray(zeros), state, study32.params, g, mpc))
+    return lambda width, timer_width: decide_with(surrogate_model(grid, width, timer_width))
+
+
+def test_one_decision_beats_no_shedding(study32, stalled_case, decision):
+    env, state, grid = stalled_case
     assert np.any(np.asarray(state.grid.load_flags[0]["run_a"]) == 0.0), "motors stalled"
-    surrogate = surrogate_model(grid, mpc.width, mpc.timer_width)
-    best_plan, best, no_shedding = jax.jit(lambda: decide(
-        env, options.iterations, jnp.asarray(zeros), state, study32.params, surrogate,
-        mpc))()
+    options = MpcOptions()
+    best_plan, best, no_shedding = decision(options.width, options.timer_width)
     assert float(best) > float(no_shedding) + 0.05 * abs(float(no_shedding)), \
         (float(best), float(no_shedding))
     assert float(jnp.max(best_plan)) <= -study32.params.action_low + 1e-7
     assert float(jnp.min(best_plan)) >= 0.0
 
 
-def test_surrogate_changes_gradients_not_trajectories(study32, stalled_case):
-    env, state, grid = stalled_case
-    plan = jnp.full((4, len(env.action_slots)), 0.1, jnp.float32)
-
-    def run(width):
-        g = surrogate_model(grid, width, width)
-        return jax.value_and_grad(lambda p: horizon_return(env, p, state, study32.params, g))(
-            plan)
-
-    (v0, g0), (v1, g1) = jax.jit(run)(0.0), jax.jit(run)(0.05)
-    assert float(v0) == float(v1), "the surrogate leaves the predicted return unchanged"
-    assert not np.array_equal(np.asarray(g0), np.asarray(g1)), "but not its gradient"
+def test_surrogate_changes_gradients_not_trajectories(decision):
+    # the same start, predicted with and without the surrogate: the same return (the
+    # trajectory is the exact model's), different ascent steps (its gradient is not)
+    plan0, _, start0 = decision(0.0, 0.0)
+    plan1, _, start1 = decision(0.05, 0.05)
+    assert float(start0) == float(start1), "the surrogate leaves the predicted return unchanged"
+    assert not np.array_equal(np.asarray(plan0), np.asarray(plan1)), "but not its gradient"
 
 
 def test_options_parse_and_name_the_bad_one(study32):
