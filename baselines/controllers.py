@@ -20,6 +20,7 @@ its inputs from the study's observation.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -146,7 +147,8 @@ def _saved(spec: str, path: str, kind: str | None) -> str:
 def _environment(spec: str, info: dict, study, obs_size: int) -> LoadSheddingEnv:
     """The study's environment stacking the saved policy's history (1 if it names none);
     ValueError naming both layouts if the policy observes or acts on other buses, or the
-    policy's input size if it differs."""
+    policy's input size if it differs; a warning if the policy was trained under another
+    action mask (`EnvConfig.action_mask`, recorded since the masks came)."""
     env = study.env(history=int(info.get("history", 1)))
     trained, here = info.get("layout"), layout(env.config)
     if trained is not None and trained != here:
@@ -155,4 +157,10 @@ def _environment(spec: str, info: dict, study, obs_size: int) -> LoadSheddingEnv
     if obs_size != env.config.history * env.obs_size:
         raise ValueError(f"{spec}: the policy observes {obs_size} values, this "
                          f"environment gives {env.config.history * env.obs_size}")
+    mask = info.get("action_mask")
+    if mask is not None and mask != env.config.action_mask:
+        warnings.warn(f"{spec} was trained with action_mask = {mask!r} (study "
+                      f"{info.get('study')!r}); study {study.name!r} has "
+                      f"{env.config.action_mask!r}: its requests pass otherwise than in "
+                      "training (evaluate it on a study with its mask)", stacklevel=3)
     return env

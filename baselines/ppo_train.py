@@ -142,6 +142,7 @@ def train_ppo(config: PPOTrainConfig, study: Study) -> PPOTrainResult:
     algo = make_ppo(adapter, params, ppo)
     run_info = {"study": study.name, "points": [p.label for p in study.points],
                 "task_set": config.task_set, "layout": layout(env.config),
+                "action_mask": env.config.action_mask,
                 "history": env.config.history, "episode": env.config.episode,
                 "config": dataclasses.asdict(ppo)}
     state, log = host_state(algo.init_state(jax.random.PRNGKey(ppo.seed))), []

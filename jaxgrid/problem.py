@@ -211,6 +211,7 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
              for s in chosen]  # indices into the set's points, in order
     info = {"study": study.name, "points": [p.label for p in study.points],
             "task_set": task_set, "task_sampling": sampling, "layout": layout(env.config),
+            "action_mask": env.config.action_mask,
             "history": env.config.history, "episode": env.config.episode,
             **({"shaping": dict(shaping)} if shaping else {})}
     return GridProblem(

@@ -297,6 +297,25 @@ def test_policy_of_another_layout_is_refused_by_name(tmp_path, ieee39):
         evaluate(ieee39, f"policy:{folder}", "test")
 
 
+def test_policy_trained_under_another_action_mask_is_loaded_with_a_warning(tmp_path, ieee39):
+    """A saved policy records the action mask it was trained under; loading it on a study
+    with another mask warns (its requests would pass otherwise than in training)."""
+    from baselines.controllers import load
+
+    folder = tmp_path / "policy"
+    folder.mkdir()
+    n_obs = ieee39.env().obs_size
+    (folder / "policy.json").write_text(json.dumps({
+        "spec": {"kind": "linear", "obs_size": n_obs, "action_size": 3, "hidden": [],
+                 "action_low": -0.2, "action_high": 0.0}, "study": "masked",
+        "action_mask": "hadrec"}))
+    np.savez(folder / "policy.npz", theta=np.zeros(3 * n_obs + 3), mean=np.zeros(n_obs),
+             std=np.ones(n_obs))
+    with pytest.warns(UserWarning, match=r"trained with action_mask = 'hadrec' \(study "
+                                         r"'masked'\); study 'ieee39_fidvr' has 'none'"):
+        load(f"policy:{folder}", ieee39)
+
+
 def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):
     import tomllib
 
@@ -530,6 +549,7 @@ def test_committed_policy_runs_on_the_study_file_at_another_load_level(shared_ca
     assert study.config.action_mask == "hadrec"
     assert len(study.tasks("test")) == 120 and len(study.tasks("generalisation")) == 120
     controller = load(f"policy:{REPO / 'results/pnnl39/policy'}", study)
+    assert controller.info["action_mask"] == study.config.action_mask, "trained under it"
     env = controller.env
     action, _ = controller.apply(controller.params, np.ones(env.config.history * env.obs_size,
                                                             np.float32), controller.carry, None)
