@@ -162,5 +162,5 @@ def _environment(spec: str, info: dict, study, obs_size: int) -> LoadSheddingEnv
         warnings.warn(f"{spec} was trained with action_mask = {mask!r} (study "
                       f"{info.get('study')!r}); study {study.name!r} has "
                       f"{env.config.action_mask!r}: its requests pass otherwise than in "
-                      "training (evaluate it on a study with its mask)", stacklevel=3)
+                      "training (evaluate it on a study with its mask)", stacklevel=4)
     return env

@@ -42,7 +42,7 @@ from ars import checkpoint
 from ars.train import device_label
 from baselines.ppo import PPOConfig, make_ppo, ppo_policy, save_policy
 from jaxgrid.gym import gymnax_env
-from jaxgrid.problem import layout, play_specs
+from jaxgrid.problem import play_specs, run_info
 from jaxgrid.study import Study, write_study
 
 
@@ -140,24 +140,20 @@ def train_ppo(config: PPOTrainConfig, study: Study) -> PPOTrainResult:
     env = study.env(**overrides)
     adapter, params = gymnax_env(study, config.task_set, ppo.normalize_actions, env)
     algo = make_ppo(adapter, params, ppo)
-    run_info = {"study": study.name, "points": [p.label for p in study.points],
-                "task_set": config.task_set, "layout": layout(env.config),
-                "action_mask": env.config.action_mask,
-                "history": env.config.history, "episode": env.config.episode,
-                "config": dataclasses.asdict(ppo)}
+    info = {**run_info(study, env.config, config.task_set), "config": dataclasses.asdict(ppo)}
     state, log = host_state(algo.init_state(jax.random.PRNGKey(ppo.seed))), []
     if config.resume:
         restored = checkpoint.restore_latest(mgr, packed(state))
         if restored is None:
             raise ValueError(f"--resume: no checkpoint in {out / 'checkpoints'}")
         state, meta = unpacked(state, restored[0]), restored[1]
-        now = json.loads(json.dumps(run_info["config"]))  # tuples as the JSON lists
+        now = json.loads(json.dumps(info["config"]))  # tuples as the JSON lists
         changed = {k: (v, now[k]) for k, v in meta["config"].items() if now[k] != v}
         if changed or meta["task_set"] != config.task_set:
             raise ValueError(f"--resume: the run in {out} was started with other settings "
                              f"(saved, now): {changed or {'task_set': meta['task_set']}}")
         log = meta["metrics"]
-    (out / "config.json").write_text(json.dumps({**run_info, "env_steps": config.env_steps,
+    (out / "config.json").write_text(json.dumps({**info, "env_steps": config.env_steps,
                                                  "iterations": total}, indent=1))
     write_study(study, out / "study.toml")
     metrics_path = out / "metrics.jsonl"
@@ -192,8 +188,8 @@ def train_ppo(config: PPOTrainConfig, study: Study) -> PPOTrainResult:
         bar.set_postfix(eval=f"{row['reward_mean']:.1f}", s_per_chunk=f"{wall:.2f}")
         bar.update(n)
         state = host_state(state)
-        checkpoint.save(mgr, packed(state), {"metrics": log, "iteration": done, **run_info},
+        checkpoint.save(mgr, packed(state), {"metrics": log, "iteration": done, **info},
                         force=True, step=done)
     bar.close()
-    save_policy(out / "policy", algo, state, run_info)
+    save_policy(out / "policy", algo, state, info)
     return PPOTrainResult(state, log)

@@ -150,6 +150,16 @@ def layout(env_config: EnvConfig) -> dict:
             "include_action_status": env_config.include_action_status, **interval}
 
 
+def run_info(study: Study, env_config: EnvConfig, task_set: str) -> dict:
+    """What a training saves with its checkpoints and policies about the study it ran on
+    (PARS and PPO alike): the study, its points, the task set, the layout, the action mask
+    (a policy loaded under another warns), the history and the episode length (s)."""
+    return {"study": study.name, "points": [p.label for p in study.points],
+            "task_set": task_set, "layout": layout(env_config),
+            "action_mask": env_config.action_mask, "history": env_config.history,
+            "episode": env_config.episode}
+
+
 @dataclasses.dataclass(frozen=True)
 class GridProblem:
     """A study's task set as a training problem (the fields of `ars.train.Problem`).
@@ -209,10 +219,7 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
     points = sorted({s.operating_point for s in chosen})
     specs = [dataclasses.replace(s, operating_point=points.index(s.operating_point))
              for s in chosen]  # indices into the set's points, in order
-    info = {"study": study.name, "points": [p.label for p in study.points],
-            "task_set": task_set, "task_sampling": sampling, "layout": layout(env.config),
-            "action_mask": env.config.action_mask,
-            "history": env.config.history, "episode": env.config.episode,
+    info = {**run_info(study, env.config, task_set), "task_sampling": sampling,
             **({"shaping": dict(shaping)} if shaping else {})}
     return GridProblem(
         study, env, PointEpisode(env, params), study.batch(specs),
