@@ -74,7 +74,8 @@ class PointEpisode:
 def play_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
                policy_carry=None, trace: bool = False):
     """Every task of `specs` in one compiled call: a vmap over their operating points (models
-    batched) of `jaxgrid.episode.play_tasks` over each point's tasks (one model shared).
+    batched; none for one point) of `jaxgrid.episode.play_tasks` over each point's tasks (one
+    model shared).
 
     Every operating point of `specs` must have the same number of tasks (task sets do).
     Returns (specs in the order of the results, `play`'s dict with a leading axis).
@@ -97,12 +98,22 @@ def play_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, 
 @functools.lru_cache(maxsize=32)
 def _points_play(env: LoadSheddingEnv, policy_apply, trace: bool):
     """jit of `jaxgrid.episode.play_tasks` vmapped over operating points (models and tasks
-    batched), one per (env, policy, trace), so repeated calls reuse the compilation."""
+    batched), one per (env, policy, trace), so repeated calls reuse the compilation. One
+    operating point is played without the vmap: under it every primitive of the episode
+    would be traced through JAX's batching as well (measured: about half an evaluation's
+    tracing, docs/performance.md)."""
+
+    def play(grid, task, params, policy_params, policy_carry):
+        return episode.play_tasks(env, policy_apply, policy_params, task, params, grid,
+                                  policy_carry, trace)
 
     def run(models, tasks, params, policy_params, policy_carry):
-        return jax.vmap(lambda grid, task: episode.play_tasks(
-            env, policy_apply, policy_params, task, params, grid, policy_carry, trace))(
-                models, tasks)
+        if jax.tree.leaves(tasks)[0].shape[0] == 1:
+            one = play(*jax.tree.map(lambda a: a[0], (models, tasks)), params, policy_params,
+                       policy_carry)
+            return jax.tree.map(lambda a: a[None], one)
+        return jax.vmap(play, in_axes=(0, 0, None, None, None))(
+            models, tasks, params, policy_params, policy_carry)
 
     return jax.jit(run)
 

@@ -8,7 +8,6 @@ episodes (the fault at 1 s, no recovery judgement needed for these checks).
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
 from pathlib import Path
 
@@ -18,9 +17,8 @@ import pytest
 
 from baselines.controllers import no_control
 from jaxgrid.env import EnvParams
-from jaxgrid.episode import play_tasks
 from jaxgrid.io.raw import read_raw
-from jaxgrid.problem import at_point, play_specs, stratified_sampler
+from jaxgrid.problem import _points_play, at_point, play_specs, stratified_sampler
 from jaxgrid.study import builtin, from_files, read_study, write_study
 from jaxgrid.tasks import TaskSet, TaskSpec
 
@@ -71,20 +69,18 @@ def test_pnnl_39_bus_study_from_its_files(pnnl39, shared_cases):
 
 @pytest.fixture(scope="module")
 def uncontrolled(pnnl39):
-    """Every task of a 3-point set in one call, and the same tasks point by point through one
-    jitted rollout that takes the grid model as an argument."""
+    """Every task of a 3-point set in one call (vmapped over the points), and the same tasks
+    point by point (`play_specs` plays one point without that vmap), in the jitted rollout
+    `play_specs` caches, which takes the grid model as an argument."""
     study = pnnl39
     env = study.env()
     apply, params, carry = no_control(env)
     specs = TaskSet((4, 15), (0.05, 0.08)).specs(study.n_points)
     ordered, batch = play_specs(study, env, apply, params, specs, carry)
-    run = jax.jit(functools.partial(play_tasks, env), static_argnums=0)
-    per_point = []
-    for k in range(study.n_points):
-        mine = [s for s in ordered if s.operating_point == k]
-        per_point.append(run(apply, params, study.batch(mine).task, study.params,
-                             study.point(k), carry))
-    return ordered, batch, per_point, run
+    per_point = [play_specs(study, env, apply, params,
+                            [s for s in ordered if s.operating_point == k], carry)[1]
+                 for k in range(study.n_points)]
+    return ordered, batch, per_point, _points_play(env, apply, False)
 
 
 def test_multi_point_batch_equals_per_point_runs(uncontrolled):
@@ -100,7 +96,7 @@ def test_multi_point_batch_equals_per_point_runs(uncontrolled):
 
 def test_three_operating_points_one_compilation(uncontrolled):
     *_, run = uncontrolled
-    assert run._cache_size() == 1, "one compiled rollout serves every operating point"
+    assert run._cache_size() == 2, "the 3-point batch, and one rollout for every point"
 
 
 def test_pars_iteration_compiles_once_across_points_and_task_sets(pnnl39):
