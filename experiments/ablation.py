@@ -10,6 +10,10 @@ The file (TOML; paths relative to it):
     seeds = 3                             # per row, vmapped in one program (--seeds)
     iterations = 500
     task_sets = ["test", "generalisation"]   # each row's study's sets to score on
+    [subsets.generalisation_unseen]       # optional: a set's tasks at some operating points,
+    of = "generalisation"                 # scored from that set's evaluations (no new runs)
+    points = [1, 2, 3]
+    why = "the load levels no row trains on"
     [[rows]]
     name = "paper"
     study = "../../studies/ieee39_pnnl.toml"
@@ -46,8 +50,9 @@ from experiments.common.scores import scores, targets_met
 from experiments.common.training import Choices, shaping
 from experiments.reproduce.runs import FULL, Runs, metrics_rows
 
-SPEC_KEYS = {"out", "seeds", "iterations", "task_sets", "rows"}
+SPEC_KEYS = {"out", "seeds", "iterations", "task_sets", "rows", "subsets"}
 ROW_KEYS = {"name", "study", "flags", "why", "controller"}
+SUBSET_KEYS = {"of", "points", "why"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,6 +68,17 @@ class Row:
 
 
 @dataclasses.dataclass(frozen=True)
+class Subset:
+    """The tasks of task set `of` at operating points `points` (indices of the study's
+    points), scored from `of`'s evaluations."""
+
+    name: str
+    of: str
+    points: tuple[int, ...]
+    why: str
+
+
+@dataclasses.dataclass(frozen=True)
 class Spec:
     """An ablation file's contents (module docstring), paths absolute."""
 
@@ -72,6 +88,7 @@ class Spec:
     iterations: int
     task_sets: tuple[str, ...]
     rows: tuple[Row, ...]
+    subsets: tuple[Subset, ...] = ()
 
 
 def read_spec(path: str | Path) -> Spec:
@@ -116,7 +133,26 @@ def read_spec(path: str | Path) -> Spec:
     if len(set(names)) < len(names):
         raise ValueError(f"{path}: rows: a name used twice in {names}")
     return Spec(path, (path.parent / data["out"]).resolve(), data["seeds"], data["iterations"],
-                tuple(data["task_sets"]), tuple(rows))
+                tuple(data["task_sets"]), tuple(rows), _subsets(path, data.get("subsets", {})))
+
+
+def _subsets(path: Path, data) -> tuple[Subset, ...]:
+    """The file's [subsets.NAME] tables; ValueError naming the file and key of a bad one."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: subsets: must be tables [subsets.NAME]")
+    subsets = []
+    for name, entry in data.items():
+        entry = entry if isinstance(entry, dict) else {}
+        points = entry.get("points")
+        valid = (not set(entry) - SUBSET_KEYS and isinstance(entry.get("of"), str)
+                 and isinstance(points, list) and points
+                 and all(isinstance(i, int) and i >= 0 for i in points))
+        if not valid:
+            raise ValueError(f"{path}: subsets.{name}: a table of {sorted(SUBSET_KEYS)}: `of` "
+                             "a task set, `points` a non-empty list of operating-point "
+                             "indices >= 0")
+        subsets.append(Subset(name, entry["of"], tuple(points), entry.get("why", "")))
+    return tuple(subsets)
 
 
 def choices(spec: Spec, row: Row) -> Choices:
@@ -150,12 +186,26 @@ def run_row(spec: Spec, row: Row, train: bool, studies: dict) -> dict | None:
         runs.trained(folder, chosen)
         controllers = [f"policy:{folder / 'policy' / f'seed{i}'}" for i in range(spec.seeds)]
     record = {"folder": str(folder.relative_to(spec.out)) if folder else None}
-    for task_set in spec.task_sets:
-        none, uvls = runs.evaluation("none", task_set), runs.evaluation("uvls", task_set)
-        record[task_set] = {
+    scored = [(name, name, None) for name in spec.task_sets]
+    scored += [(s.name, s.of, s.points) for s in spec.subsets]
+    for name, task_set, points in scored:
+        none, uvls = (at_points(runs.evaluation(c, task_set), points) for c in ("none", "uvls"))
+        record[name] = {
             "uvls": scores(none, uvls, uvls),
-            "seeds": [scores(none, uvls, runs.evaluation(c, task_set)) for c in controllers]}
+            "seeds": [scores(none, uvls, at_points(runs.evaluation(c, task_set), points))
+                      for c in controllers]}
     return record
+
+
+def at_points(result: dict, points: tuple[int, ...] | None) -> dict:
+    """An evaluation `result` restricted to the tasks at operating points `points` (None:
+    all); ValueError if it ran none there."""
+    if points is None:
+        return result
+    tasks = [t for t in result["tasks"] if t["point"] in points]
+    if not tasks:
+        raise ValueError(f"{result['controller']}: no task at operating points {list(points)}")
+    return {**result, "tasks": tasks}
 
 
 def table(spec: Spec, results: dict) -> str:
@@ -169,18 +219,23 @@ def table(spec: Spec, results: dict) -> str:
              "Mean over seeds, range in brackets (a controller row: its one value); "
              "targets: seeds meeting all three "
              "(wins >= 95 %, rec. >= UVLS, sheds on <= 5 % of ok).", ""]
-    for task_set in spec.task_sets:
-        first = next((r[task_set] for r in results.values() if r), None)
+    headings = {name: name for name in spec.task_sets}
+    for subset in spec.subsets:
+        why = f": {subset.why}" if subset.why else ""
+        headings[subset.name] = (f"{subset.name} ({subset.of} at points "
+                                 f"{', '.join(map(str, subset.points))}{why})")
+    for task_set, heading in headings.items():
+        first = next((r[task_set] for r in results.values() if r and task_set in r), None)
         if first is None:
             continue
         uv = first["uvls"]
-        lines += [f"## {task_set}: {uv['n_tasks']} tasks, {uv['need']} need shedding "
+        lines += [f"## {heading}: {uv['n_tasks']} tasks, {uv['need']} need shedding "
                   f"(UVLS recovers {uv['uvls_recovered']}), {uv['ok']} need none", "",
                   "| row | wins (% of need) | rec. | MW need | sheds on (% of ok) | MW ok | "
                   "mean reward | targets | why |", "| --- " * 9 + "|"]
         for row in spec.rows:
             record = results.get(row.name)
-            if not record:
+            if not record or task_set not in record:
                 lines.append(f"| {row.name} | not trained | | | | | | | {row.why} |")
                 continue
             seeds = record[task_set]["seeds"]

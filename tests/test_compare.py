@@ -98,13 +98,14 @@ def test_ablation_file_rows_and_table(tmp_path):
     """An ablation file's rows become training choices (the file's seeds and iterations, the
     row's flags after them); bad entries name the file and key; the table shows each row's
     mean and range over seeds and how many seeds meet the targets."""
-    from experiments.ablation import choices, read_spec, table
+    from experiments.ablation import Subset, at_points, choices, read_spec, table
 
     study = tmp_path / "study.toml"
     study.write_text('[grid]\nbuiltin = "ieee39_fidvr"\n')
     spec_file = tmp_path / "ablation.toml"
     spec_file.write_text(
         'out = "out"\nseeds = 2\niterations = 7\ntask_sets = ["test"]\n'
+        '[subsets.unseen]\nof = "test"\npoints = [2, 3]\nwhy = "not trained on"\n'
         '[[rows]]\nname = "paper"\nstudy = "study.toml"\n'
         '[[rows]]\nname = "shaped"\nstudy = "study.toml"\n'
         'flags = ["--shaping", "c_normal=30", "--iterations", "9"]\nwhy = "charge"\n'
@@ -119,8 +120,21 @@ def test_ablation_file_rows_and_table(tmp_path):
     record = {"n_tasks": 5, "need": 3, "wins": 3, "recovered": 2, "uvls_recovered": 1,
               "mw_need": 50.0, "ok": 2, "sheds_on": 0, "mw_ok": 0.0, "mean_reward": -100.0}
     worse = {**record, "wins": 1, "sheds_on": 1, "mean_reward": -300.0}
+    assert spec.subsets == (Subset("unseen", "test", (2, 3), "not trained on"),)
     text = table(spec, {"paper": {"test": {"uvls": record, "seeds": [record, worse]}}})
     assert "## test: 5 tasks, 3 need shedding (UVLS recovers 1), 2 need none" in text
+    assert "## unseen" not in text  # no row scored on it yet
+    text = table(spec, {"paper": {"test": {"uvls": record, "seeds": [record, worse]},
+                                  "unseen": {"uvls": record, "seeds": [worse, worse]}}})
+    assert ("## unseen (test at points 2, 3: not trained on): 5 tasks, 3 need shedding"
+            in text)
+    assert "| paper | 33.3 [33.3, 33.3] |" in text
+    tasks = _evaluated("none", {1: (0, 0, True), 2: (-5, 0, True)})["tasks"]
+    at_two = at_points({"controller": "none", "tasks": [tasks[0], {**tasks[1], "point": 2}]},
+                       (2, 3))
+    assert [t["fault_bus"] for t in at_two["tasks"]] == [2]
+    with pytest.raises(ValueError, match=r"none: no task at operating points \[5\]"):
+        at_points(at_two, (5,))
     assert "| paper | 66.7 [33.3, 100.0] | 2.0 [2.0, 2.0] (1) |" in text
     assert "| 1/2 |" in text and "| shaped | not trained |" in text
     for body, message in (('out = "o"\nseeds = 0\niterations = 1\ntask_sets = ["t"]\n'
@@ -128,6 +142,10 @@ def test_ablation_file_rows_and_table(tmp_path):
                           ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
                            'rows = [{name = "a", study = "none.toml"}]\n',
                            r"rows\[0\].study = 'none.toml': no such file"),
+                          ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
+                           'rows = [{name = "a", study = "study.toml"}]\n'
+                           '[subsets.u]\nof = "t"\npoints = []\n',
+                           r"subsets.u: a table of .*non-empty list"),
                           ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
                            'rows = [{name = "a", study = "study.toml"}, '
                            '{name = "a", study = "study.toml"}]\n', r"a name used twice"),
