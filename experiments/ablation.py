@@ -236,7 +236,8 @@ def table(spec: Spec, results: dict) -> str:
         for row in spec.rows:
             record = results.get(row.name)
             if not record or task_set not in record:
-                lines.append(f"| {row.name} | not trained | | | | | | | {row.why} |")
+                missing = "not scored (rerun with --no-train)" if record else "not trained"
+                lines.append(f"| {row.name} | {missing} | | | | | | | {row.why} |")
                 continue
             seeds = record[task_set]["seeds"]
             cell = lambda key, scale=1.0, fmt="{:.1f}": _cell(  # noqa: E731

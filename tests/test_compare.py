@@ -124,6 +124,10 @@ def test_ablation_file_rows_and_table(tmp_path):
     text = table(spec, {"paper": {"test": {"uvls": record, "seeds": [record, worse]}}})
     assert "## test: 5 tasks, 3 need shedding (UVLS recovers 1), 2 need none" in text
     assert "## unseen" not in text  # no row scored on it yet
+    text = table(spec, {"paper": {"test": {"uvls": record, "seeds": [record, worse]}},
+                        "shaped": {"test": {"uvls": record, "seeds": [record, worse]},
+                                   "unseen": {"uvls": record, "seeds": [worse, worse]}}})
+    assert "| paper | not scored (rerun with --no-train) |" in text
     text = table(spec, {"paper": {"test": {"uvls": record, "seeds": [record, worse]},
                                   "unseen": {"uvls": record, "seeds": [worse, worse]}}})
     assert ("## unseen (test at points 2, 3: not trained on): 5 tasks, 3 need shedding"
