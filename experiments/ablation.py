@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import sys
 import tomllib
@@ -186,13 +187,14 @@ def run_row(spec: Spec, row: Row, train: bool, studies: dict) -> dict | None:
         runs.trained(folder, chosen)
         controllers = [f"policy:{folder / 'policy' / f'seed{i}'}" for i in range(spec.seeds)]
     record = {"folder": str(folder.relative_to(spec.out)) if folder else None}
+    evaluation = functools.cache(runs.evaluation)  # a subset reads its set's result once
     scored = [(name, name, None) for name in spec.task_sets]
     scored += [(s.name, s.of, s.points) for s in spec.subsets]
     for name, task_set, points in scored:
-        none, uvls = (at_points(runs.evaluation(c, task_set), points) for c in ("none", "uvls"))
+        none, uvls = (at_points(evaluation(c, task_set), points) for c in ("none", "uvls"))
         record[name] = {
             "uvls": scores(none, uvls, uvls),
-            "seeds": [scores(none, uvls, at_points(runs.evaluation(c, task_set), points))
+            "seeds": [scores(none, uvls, at_points(evaluation(c, task_set), points))
                       for c in controllers]}
     return record
 
