@@ -26,7 +26,7 @@ from typing import Any
 
 import jax.numpy as jnp
 
-from jaxgrid.env import LoadSheddingEnv
+from jaxgrid.env import LoadSheddingEnv, mask_passes
 from jaxgrid.problem import GridProblem, layout
 
 SPECS = "none, uvls, mpc[:OPTIONS], policy:PATH, ppo:PATH or rlgc:FILE"
@@ -47,6 +47,8 @@ class Controller:
       history: the observations it stacks (a saved or published policy's, as trained), None
         for the others (the study's).
       info: a saved policy's run information (policy.json), {} for the others.
+      own_mask: the action mask a saved policy applies to its own requests (`load`), None
+        when it applies none.
     """
 
     spec: str
@@ -57,6 +59,7 @@ class Controller:
     layout: dict | None = None
     history: int | None = None
     info: dict = dataclasses.field(default_factory=dict)
+    own_mask: str | None = None
 
 
 def no_control(env: LoadSheddingEnv):
@@ -121,14 +124,48 @@ SAVED_KINDS = {"policy": None, "ppo": "ppo"}  # prefix -> the "kind" its policy.
 ARGUMENT = {"none": False, "uvls": False, "mpc": None}  # takes none / may take one (else: must)
 
 
-def load(spec: str, study) -> Controller:
+def load(spec: str, study, own_mask: bool = True) -> Controller:
     """The controller `spec` (module docstring) on `study`'s environment; ValueError naming
-    the spec if it is none of `SPECS`, or a saved policy that does not fit the study."""
+    the spec if it is none of `SPECS`, or a saved policy that does not fit the study.
+
+    A saved policy trained under an action mask (policy.json's "action_mask",
+    `EnvConfig.action_mask`) that the study's environment does not apply masks its own
+    requests with it (`own_mask`, `masked`: the supervision it was trained with travels
+    with it, as a relay's arming logic does), with a warning that says so; own_mask=False
+    leaves them unmasked (they then pass otherwise than in training, which the warning
+    says). [choice]; the PNNL study's policies have no mask, so neither changes them."""
     prefix, colon, argument = spec.partition(":")
     takes = ARGUMENT.get(prefix, True)
     if prefix not in LOADERS or (takes is False and colon) or (takes is True and not argument):
         raise ValueError(f"--controller {spec!r}: allowed {SPECS}")
-    return LOADERS[prefix](spec, argument, study)
+    controller = LOADERS[prefix](spec, argument, study)
+    trained, here = controller.info.get("action_mask", "none"), controller.env.config.action_mask
+    if trained in ("none", here):
+        return controller
+    warnings.warn(f"{spec} was trained with action_mask = {trained!r} (study "
+                  f"{controller.info.get('study')!r}); study {study.name!r} has {here!r}: "
+                  + ("it masks its own requests as in training" if own_mask else
+                     "its requests pass otherwise than in training (own_mask off)"),
+                  stacklevel=2)
+    if not own_mask:
+        return controller
+    return dataclasses.replace(controller, apply=masked(controller.apply, trained,
+                                                        controller.env), own_mask=trained)
+
+
+def masked(apply, mask: str, env: LoadSheddingEnv) -> Callable:
+    """`apply` (`Controller.apply`) with its actions at the action buses that `mask` does not
+    let shed (`jaxgrid.env.mask_passes` on the episode's state: the bus voltages at the
+    request and the time since clearing) set to 0 (no shedding)."""
+    agent_dt = env.config.agent_dt
+
+    def apply_masked(params, obs, carry, inputs):
+        action, carry = apply(params, obs, carry, inputs)
+        t = inputs.state.step.astype(inputs.grid.network.real_dtype) * agent_dt
+        passes = mask_passes(mask, inputs.state, t, inputs.params)
+        return jnp.where(passes, action, jnp.zeros_like(action)), carry
+
+    return apply_masked
 
 
 def _saved(spec: str, path: str, kind: str | None) -> str:
@@ -147,8 +184,7 @@ def _saved(spec: str, path: str, kind: str | None) -> str:
 def _environment(spec: str, info: dict, study, obs_size: int) -> LoadSheddingEnv:
     """The study's environment stacking the saved policy's history (1 if it names none);
     ValueError naming both layouts if the policy observes or acts on other buses, or the
-    policy's input size if it differs; a warning if the policy was trained under another
-    action mask (`EnvConfig.action_mask`, recorded since the masks came)."""
+    policy's input size if it differs."""
     env = study.env(history=int(info.get("history", 1)))
     trained, here = info.get("layout"), layout(env.config)
     if trained is not None and trained != here:
@@ -157,10 +193,4 @@ def _environment(spec: str, info: dict, study, obs_size: int) -> LoadSheddingEnv
     if obs_size != env.config.history * env.obs_size:
         raise ValueError(f"{spec}: the policy observes {obs_size} values, this "
                          f"environment gives {env.config.history * env.obs_size}")
-    mask = info.get("action_mask")
-    if mask is not None and mask != env.config.action_mask:
-        warnings.warn(f"{spec} was trained with action_mask = {mask!r} (study "
-                      f"{info.get('study')!r}); study {study.name!r} has "
-                      f"{env.config.action_mask!r}: its requests pass otherwise than in "
-                      "training (evaluate it on a study with its mask)", stacklevel=4)
     return env

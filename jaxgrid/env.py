@@ -298,6 +298,19 @@ def prefault_requests(request, t, fault_start):
     return jnp.sum(request > 0) * (t < fault_start)
 
 
+def mask_passes(mask: str, state: EnvState, t, params: EnvParams):
+    """(n_action,) bool: the action buses whose requests `mask` ("hadrec" or
+    "undervoltage", `EnvConfig.action_mask`) lets through at agent time t (s) from `state`
+    (its bus voltages at the request, `state.action_vm`, p.u., and its task's clearing
+    time)."""
+    after = t - state.task.fault_end
+    if mask == "hadrec":
+        return mask_allows(state.action_vm, after, jnp)
+    if mask == "undervoltage":
+        return supervision_allows(state.action_vm, after, params.recovery_level, jnp)
+    raise ValueError(f"action_mask {mask!r}: the masks are {ACTION_MASKS[1:]}")
+
+
 def recovery_failed(vm, check, t_after_clearing, params: EnvParams):
     """() bool: after the recovery time, a checked voltage is still below the level."""
     late = t_after_clearing > params.recovery_time
@@ -418,12 +431,8 @@ class LoadSheddingEnv:
                      + params.c_normal * normal_requests(request, state.action_vm,
                                                          t - task.fault_end)
                      + params.c_prefault * prefault_requests(request, t, task.fault_start))
-        if cfg.action_mask == "hadrec":
-            request = jnp.where(mask_allows(state.action_vm, t - task.fault_end, jnp),
-                                request, 0.0)
-        elif cfg.action_mask == "undervoltage":
-            request = jnp.where(supervision_allows(state.action_vm, t - task.fault_end,
-                                                   params.recovery_level, jnp), request, 0.0)
+        if cfg.action_mask != "none":
+            request = jnp.where(mask_passes(cfg.action_mask, state, t, params), request, 0.0)
         amount = jnp.minimum(request, left)
         x = state.grid.replace(load_left=shed(state.grid.load_left, self.action_slots, amount))
         fault = self._fault(grid, task)

@@ -293,9 +293,10 @@ def test_policy_of_another_layout_is_refused_by_name(tmp_path, ieee39):
         evaluate(ieee39, f"policy:{folder}", "test")
 
 
-def test_policy_trained_under_another_action_mask_is_loaded_with_a_warning(tmp_path, ieee39):
-    """A saved policy records the action mask it was trained under; loading it on a study
-    with another mask warns (its requests would pass otherwise than in training)."""
+def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_path, ieee39):
+    """A saved policy records the action mask it was trained under; loaded on a study without
+    it, it masks its own requests and says so (own_mask=False: unmasked, and the warning says
+    its requests pass otherwise than in training)."""
     from baselines.controllers import load
 
     folder = tmp_path / "policy"
@@ -308,8 +309,13 @@ def test_policy_trained_under_another_action_mask_is_loaded_with_a_warning(tmp_p
     np.savez(folder / "policy.npz", theta=np.zeros(3 * n_obs + 3), mean=np.zeros(n_obs),
              std=np.ones(n_obs))
     with pytest.warns(UserWarning, match=r"trained with action_mask = 'hadrec' \(study "
-                                         r"'masked'\); study 'ieee39_fidvr' has 'none'"):
-        load(f"policy:{folder}", ieee39)
+                                         r"'masked'\); study 'ieee39_fidvr' has 'none': it "
+                                         r"masks its own requests as in training"):
+        own = load(f"policy:{folder}", ieee39)
+    with pytest.warns(UserWarning, match=r"its requests pass otherwise than in training"):
+        plain = load(f"policy:{folder}", ieee39, own_mask=False)
+    assert (own.own_mask, plain.own_mask) == ("hadrec", None)
+    assert own.apply is not plain.apply
 
 
 def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):

@@ -30,10 +30,11 @@ def task_specs(study: Study, tasks: str):
 
 
 def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
-             plot_count: int = 3) -> dict:
+             plot_count: int = 3, own_mask: bool = True) -> dict:
     """The results dict of the module docstring (and figures in plot_dir). `tasks`: a task
-    set name, a PNNL task JSON, or a list of TaskSpec."""
-    controller = load(control, study)
+    set name, a PNNL task JSON, or a list of TaskSpec. own_mask: a saved policy trained under
+    an action mask the study lacks masks its own requests (`baselines.controllers.load`)."""
+    controller = load(control, study, own_mask)
     env = controller.env
     log = training_log(control.removeprefix("rlgc:")) if control.startswith("rlgc:") else None
     for k, point in enumerate(study.points):
@@ -54,6 +55,7 @@ def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
             _plot(Path(plot_dir), specs[k], study, env, out, int(k), control)
     rewards = [r["reward"] for r in rows]
     result = {"study": study.name, "controller": control,
+              **({"own_mask": controller.own_mask} if controller.own_mask else {}),
               "points": [p.label for p in study.points], "tasks": rows,
               "summary": {"n_tasks": len(rows),
                           "n_recovered": sum(r["recovered"] for r in rows),
