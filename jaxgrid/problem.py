@@ -22,6 +22,7 @@ import numpy as np
 
 from jaxgrid import episode, population
 from jaxgrid.batching import batch_major
+from jaxgrid.checks import Range
 from jaxgrid.env import EnvConfig, EnvParams, LoadSheddingEnv
 from jaxgrid.grid import GridModel
 from jaxgrid.study import Study, write_study
@@ -184,6 +185,8 @@ class GridProblem:
       sampler: m -> `stratified_sampler`, or None (uniform).
       info: the run information saved with checkpoints and policies (study, points, task
         set, task sampling, layout, history, episode).
+      quiet_charge: c_quiet (`training_problem`), per p.u. of load shed on a task that
+        recovers without control (`tasks.quiet`); 0: none.
     """
 
     network = staticmethod(batch_major)  # a policy network runs batch-first in the episodes
@@ -199,15 +202,31 @@ class GridProblem:
     action_high: float
     sampler: Callable | None
     info: dict
+    quiet_charge: float = 0.0
 
     def evaluator(self, apply, carry, mesh, **batching) -> Callable:
         """The problem's `evaluate` of a population of `apply` (`jaxgrid.population.evaluator`
-        of `PointEpisode`; batching: task_batch, compact_after, compact_chunks)."""
-        return population.evaluator(self.episode, apply, carry, mesh, **batching)
+        of `PointEpisode`; batching: task_batch, compact_after, compact_chunks), each
+        episode's reward less quiet_charge·(its load shed, p.u.) on the quiet tasks."""
+        evaluate = population.evaluator(self.episode, apply, carry, mesh, **batching)
+        if not self.quiet_charge:
+            return evaluate
+
+        def charged(thetas, shared, tasks: PointTask, data):
+            out = evaluate(thetas, shared, tasks, data)  # (P, m) per episode
+            charge = self.quiet_charge * out["shed_pu"] * tasks.quiet
+            return {**out, "reward": out["reward"] - charge.astype(out["reward"].dtype)}
+
+        return charged
 
     def save(self, folder: Path) -> None:
         """The resolved study as folder/study.toml (a run folder alone reproduces it)."""
         write_study(self.study, Path(folder) / "study.toml")
+
+
+# c_quiet of `training_problem`'s shaping (not an EnvParams field: the environment cannot
+# know whether a task would recover without control; the training problem can)
+QUIET_CHARGE = Range(0.0, 1e9, "per p.u. of load shed on a task that recovers without control")
 
 
 def training_problem(study: Study, policy_kind: str, history: int | None = None,
@@ -218,12 +237,18 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
     observations stacked (default the study's for the kind), tasks drawn by `sampling`
     ("uniform" | "stratified" (one set only), default the study's), rewarded with the study's
     `EnvParams` but for the fields of `shaping` ({field: value}: reward weights for training
-    only; evaluations keep the study's). The data holds only the set's operating points."""
+    only; evaluations keep the study's). shaping's "c_quiet" (`QUIET_CHARGE`) charges, on
+    top, each p.u. of load shed on a task that recovers without control (`quiet_tasks`, run
+    once here): a label only a trainer has, so it shapes training and enters no
+    evaluation. The data holds only the set's operating points."""
     history = study.history(policy_kind) if history is None else history
     sampling = sampling or study.definition.training.task_sampling
     overrides = {k: v for k, v in (("history", history), ("episode", episode)) if v is not None}
     env = study.env(**overrides)
-    params = dataclasses.replace(study.params, **(shaping or {}))
+    weights = dict(shaping or {})
+    quiet_charge = float(weights.pop("c_quiet", 0.0))
+    QUIET_CHARGE.check("c_quiet", quiet_charge)
+    params = dataclasses.replace(study.params, **weights)
     if sampling == "stratified" and "+" in task_set:
         raise ValueError(f"--task-set {task_set}: stratified sampling draws from one task set")
     chosen = study.tasks(task_set)
@@ -232,10 +257,35 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
              for s in chosen]  # indices into the set's points, in order
     info = {**run_info(study, env.config, task_set), "task_sampling": sampling,
             **({"shaping": dict(shaping)} if shaping else {})}
+    tasks = study.batch(specs)
+    if quiet_charge:
+        quiet = quiet_tasks(study, env, chosen)
+        print(f"c_quiet = {quiet_charge:g}: {int(quiet.sum())} of {len(quiet)} training tasks "
+              "recover without control")
+        tasks = tasks.replace(quiet=quiet)
     return GridProblem(
-        study, env, PointEpisode(env, params), study.batch(specs),
+        study, env, PointEpisode(env, params), tasks,
         jax.tree.map(lambda a: a[np.array(points)], study.models),
         env.config.history * env.obs_size, len(env.action_slots), float(params.action_low),
         float(params.action_high),
         (functools.partial(stratified_sampler, study.task_set(task_set), study.n_points)
-         if sampling == "stratified" else None), info)
+         if sampling == "stratified" else None), info, quiet_charge)
+
+
+def quiet_tasks(study: Study, env: LoadSheddingEnv, specs) -> np.ndarray:
+    """(len(specs),) bool: each task of `specs` recovers in `env` with no shedding (one
+    uncontrolled episode each, `play_specs` per operating point)."""
+    idle = _idle(len(env.action_slots))
+    recovered = {}
+    for point in sorted({s.operating_point for s in specs}):
+        ordered, out = play_specs(study, env, idle, None,
+                                  [s for s in specs if s.operating_point == point])
+        recovered.update(zip(ordered, out["recovered"]))
+    return np.array([bool(recovered[s]) for s in specs])
+
+
+@functools.lru_cache(maxsize=8)
+def _idle(n_action: int) -> Callable:
+    """A controller that never sheds (one function per size: `play_specs` reuses its
+    compilation)."""
+    return lambda params, obs, carry, inputs: (jnp.zeros(n_action), carry)

@@ -105,10 +105,13 @@ class PointTask:
 
     Attributes:
       point: () int index into the study's operating points.  task: the `simulate.Task`.
+      quiet: () bool, the task recovers without control (a training label,
+        `jaxgrid.problem.training_problem`'s c_quiet), or None where no one asked.
     """
 
     point: np.ndarray
     task: Task
+    quiet: np.ndarray | None = None
 
 
 def task_batch(model: GridModel, specs: Sequence[TaskSpec]) -> PointTask:

@@ -215,6 +215,33 @@ def test_shaping_and_joined_task_sets_change_the_training_only(capsys, ieee39):
     assert "--shaping 'c_volt=1'" in capsys.readouterr().err
 
 
+def test_c_quiet_charges_shedding_on_the_tasks_that_recover_without_control(monkeypatch,
+                                                                             ieee39):
+    """--shaping c_quiet=C labels each training task by one uncontrolled episode (the
+    zero-duration faults recover, bus 4's 0.08-s fault, the study's FIDVR case, does not)
+    and charges C per p.u. shed on the quiet ones, in training only: the evaluator's rewards
+    (population's, stubbed here) lose C·shed_pu where the task is quiet, nothing elsewhere;
+    the episodes' own reward weights stay the study's; a negative C names the flag."""
+    from experiments.common.training import shaping
+    from jaxgrid import population
+    from jaxgrid.problem import training_problem
+
+    problem = training_problem(ieee39, "lstm", shaping=dict(shaping(["c_quiet=500"])))
+    specs = ieee39.tasks("train")
+    quiet = dict(zip([(s.fault_bus, s.fault_duration) for s in specs], problem.tasks.quiet))
+    assert all(quiet[bus, 0.0] for bus in (4, 15, 21)) and not quiet[4, 0.08]
+    assert problem.episode.params == ieee39.params and problem.quiet_charge == 500.0
+    reward = np.array([[-10.0, -20.0, -30.0], [-1.0, -2.0, -3.0]])  # (P, m)
+    shed = np.array([[0.5, 0.5, 0.0], [0.1, 0.0, 0.2]])
+    monkeypatch.setattr(population, "evaluator", lambda *a, **k: (
+        lambda thetas, shared, tasks, data: {"reward": reward, "shed_pu": shed}))
+    tasks = problem.tasks.replace(quiet=np.array([True, False, True]))
+    out = problem.evaluator(None, None, None)(None, None, tasks, None)
+    np.testing.assert_allclose(out["reward"], [[-260.0, -20.0, -30.0], [-51.0, -2.0, -103.0]])
+    with pytest.raises(ValueError, match=r"--shaping c_quiet = -1.0: must lie in"):
+        shaping(["c_quiet=-1"])
+
+
 def test_task_batch_auto_is_every_task_on_a_gpu_and_the_preset_elsewhere(monkeypatch, capsys):
     """--task-batch 'auto' (the default) is the command's preset on CPUs (one task per batch
     for the 300-bus command) and all m tasks in one batch (None) on a GPU; a number is kept;

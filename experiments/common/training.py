@@ -118,13 +118,15 @@ def problem(study, choices: Choices = Choices()):
 
 
 SHAPING_FIELDS = ("c_voltage", "c_shed", "c_invalid", "c_normal", "c_prefault",
-                  "unstable_penalty")
+                  "unstable_penalty", "c_quiet")
 
 
 def shaping(items) -> tuple[tuple[str, float], ...]:
     """`Choices.shaping` of --shaping FIELD=VALUE items (reward weights of
-    `jaxgrid.env.EnvParams`, in their ranges); ValueError naming the flag and the item."""
+    `jaxgrid.env.EnvParams`, in their ranges, and c_quiet, `jaxgrid.problem.
+    training_problem`'s); ValueError naming the flag and the item."""
     from jaxgrid.env import check_params
+    from jaxgrid.problem import QUIET_CHARGE
 
     pairs = []
     for item in items:
@@ -136,7 +138,10 @@ def shaping(items) -> tuple[tuple[str, float], ...]:
             number = float(value)
         except ValueError:
             raise ValueError(f"--shaping {item!r}: VALUE must be a number") from None
-        check_params({field: number}, key=lambda f: f"--shaping {f}")
+        if field == "c_quiet":
+            QUIET_CHARGE.check("--shaping c_quiet", number)
+        else:
+            check_params({field: number}, key=lambda f: f"--shaping {f}")
         pairs.append((field, number))
     if len({f for f, _ in pairs}) < len(pairs):
         raise ValueError(f"--shaping {' '.join(items)}: a field given twice")
