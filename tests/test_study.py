@@ -296,7 +296,7 @@ def test_policy_of_another_layout_is_refused_by_name(tmp_path, ieee39):
 def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_path, ieee39):
     """A saved policy records the action mask it was trained under; loaded on a study without
     it, it masks its own requests and says so (own_mask=False: unmasked, and the warning says
-    its requests pass otherwise than in training)."""
+    its requests pass otherwise than in training); the latency benchmark times it."""
     from baselines.controllers import load
 
     folder = tmp_path / "policy"
@@ -316,6 +316,13 @@ def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_pat
         plain = load(f"policy:{folder}", ieee39, own_mask=False)
     assert (own.own_mask, plain.own_mask) == ("hadrec", None)
     assert own.apply is not plain.apply
+    # the latency benchmark (the reproduction's tab3) times it deciding from a faulted state
+    from experiments.bench.controller_latency import bench_study
+
+    with pytest.warns(UserWarning, match=r"masks its own requests"):
+        rows = bench_study("ieee39_fidvr", batch=2, calls=1, mpc=None, mpc_batch=2,
+                           policies={"masked": str(folder)})["controllers"]
+    assert [r["controller"] for r in rows] == ["masked", "uvls"]
 
 
 def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):

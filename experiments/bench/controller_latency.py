@@ -56,16 +56,25 @@ def _saved_controllers(study, policies: dict):
     return [(label, c.env, c.apply, c.params, c.carry) for label, c in loaded.items()]
 
 
-def mpc_row(study, options: str, batch: int, calls: int) -> dict:
-    """The MPC's latency row: one decision (`baselines.mpc.decide`) from a faulted state."""
+def faulted_inputs(study) -> ControlInputs:
+    """What the episode gives a controller (`jaxgrid.episode.ControlInputs`) 0.3 s after the
+    first test fault starts, no shedding before: the state every controller decides from
+    (the MPC plans from it; a policy masking its own requests reads its bus voltages and
+    time since clearing; none reads its stacked observations)."""
     env = study.env()
-    planner, mpc, zeros = mpc_controller(env, parse_options(options))
     spec = study.tasks("test")[0]
     grid = jax.tree.map(jnp.asarray, study.point(spec.operating_point))
     task = jax.tree.map(lambda a: a[0], study.batch([spec]).task)
     steps = int(round((spec.fault_start + 0.3) / env.config.agent_dt))
     state = jax.jit(lambda t: env.state_after(t, study.params, grid, steps))(task)
-    inputs = ControlInputs(state, grid, study.params, jnp.zeros((), jnp.int32))
+    return ControlInputs(state, grid, study.params, jnp.zeros((), jnp.int32))
+
+
+def mpc_row(study, options: str, batch: int, calls: int, inputs: ControlInputs) -> dict:
+    """The MPC's latency row: one decision (`baselines.mpc.decide`) from the faulted state of
+    `inputs` (`faulted_inputs`)."""
+    planner, mpc, zeros = mpc_controller(study.env(), parse_options(options))
+    state, grid = inputs.state, inputs.grid
     one = jax.jit(lambda plan, inputs: planner.plan(plan, inputs, mpc))
     many = jax.jit(jax.vmap(lambda plan, inputs: planner.plan(plan, inputs, mpc),
                             in_axes=(0, ControlInputs(0, None, None, None))))
@@ -87,14 +96,15 @@ def bench_study(name: str, batch: int, calls: int, mpc: str | None, mpc_batch: i
     rows = []
     pars = _saved_controllers(study, policies) if policies else _controllers(study)
     uvls_env = study.env()
+    inputs = faulted_inputs(study)
     for label, env, apply, params, carry in [*pars, ("uvls", uvls_env,
                                                      *uvls_policy(uvls_env))]:
         obs = jnp.ones(env.config.history * env.obs_size)
         one = jax.jit(apply)
-        many = jax.jit(jax.vmap(apply, in_axes=(None, 0, 0, None)))  # inputs: unused
+        many = jax.jit(jax.vmap(apply, in_axes=(None, 0, 0, None)))  # one state for all
         carries = jax.tree.map(lambda a: jnp.broadcast_to(a, (batch,) + jnp.shape(a)), carry)
-        single = _median_call(one, (params, obs, carry, None), calls)
-        batched = _median_call(many, (params, jnp.tile(obs, (batch, 1)), carries, None),
+        single = _median_call(one, (params, obs, carry, inputs), calls)
+        batched = _median_call(many, (params, jnp.tile(obs, (batch, 1)), carries, inputs),
                                max(10, calls // 10))
         row = {"controller": label, "obs_size": int(obs.shape[0]),
                "one_task_ms": round(1e3 * single, 4),
@@ -102,7 +112,7 @@ def bench_study(name: str, batch: int, calls: int, mpc: str | None, mpc_batch: i
         print(name, row, flush=True)
         rows.append(row)
     if mpc is not None:
-        row = mpc_row(study, mpc, mpc_batch, calls)
+        row = mpc_row(study, mpc, mpc_batch, calls, inputs)
         print(name, row, flush=True)
         rows.append(row)
     return {"study": name, "batch": batch, "controllers": rows}
