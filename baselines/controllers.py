@@ -27,6 +27,7 @@ from typing import Any
 import jax.numpy as jnp
 
 from jaxgrid.env import LoadSheddingEnv, mask_passes
+from jaxgrid.episode import idle_controller
 from jaxgrid.problem import GridProblem, layout
 
 SPECS = "none, uvls, mpc[:OPTIONS], policy:PATH, ppo:PATH or rlgc:FILE"
@@ -63,9 +64,9 @@ class Controller:
 
 
 def no_control(env: LoadSheddingEnv):
-    """(apply, params, carry) of a controller that never sheds."""
-    n = len(env.action_slots)
-    return (lambda params, obs, carry, inputs: (jnp.zeros(n), carry)), None, None
+    """(apply, params, carry) of a controller that never sheds (`jaxgrid.episode.
+    idle_controller`)."""
+    return idle_controller(len(env.action_slots)), None, None
 
 
 def _none(spec: str, argument: str, study) -> Controller:

@@ -20,6 +20,9 @@ which a trainer regroups the episodes still running (`jaxgrid.population`). The 
 """
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -91,6 +94,13 @@ def run(env: LoadSheddingEnv, controller, controller_params, params: EnvParams,
 def done(loop: EpisodeLoop):
     """() bool: the episode of `loop` has ended."""
     return loop.env_state.done
+
+
+@functools.lru_cache(maxsize=8)
+def idle_controller(n_action: int) -> Callable:
+    """A controller (`play`'s signature) that never sheds at n_action buses; one function per
+    size, so a compiled play of it is reused."""
+    return lambda params, obs, carry, inputs: (jnp.zeros(n_action), carry)
 
 
 def result(loop: EpisodeLoop) -> dict:

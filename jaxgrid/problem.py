@@ -275,17 +275,10 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
 def quiet_tasks(study: Study, env: LoadSheddingEnv, specs) -> np.ndarray:
     """(len(specs),) bool: each task of `specs` recovers in `env` with no shedding (one
     uncontrolled episode each, `play_specs` per operating point)."""
-    idle = _idle(len(env.action_slots))
+    idle = episode.idle_controller(len(env.action_slots))
     recovered = {}
     for point in sorted({s.operating_point for s in specs}):
         ordered, out = play_specs(study, env, idle, None,
                                   [s for s in specs if s.operating_point == point])
         recovered.update(zip(ordered, out["recovered"]))
     return np.array([bool(recovered[s]) for s in specs])
-
-
-@functools.lru_cache(maxsize=8)
-def _idle(n_action: int) -> Callable:
-    """A controller that never sheds (one function per size: `play_specs` reuses its
-    compilation)."""
-    return lambda params, obs, carry, inputs: (jnp.zeros(n_action), carry)
