@@ -74,6 +74,10 @@ FIRST = "first"  # the flag of a value kept batch-first (`vmap_minor`'s `first`)
 # while `fallbacks` traces: {primitive name: times evaluated by the fallback}
 _FALLBACK_COUNTS: ContextVar[Counter | None] = ContextVar("vmap_minor_fallbacks",
                                                           default=None)
+# while `batch_last` traces: {(jaxpr, input flags): output flags} of `out_flags`, so that a
+# loop body's flags are found once per trace, not again at each fixpoint round of every loop
+# around it (nested loops made that exponential in their depth)
+_OUT_FLAGS_MEMO: ContextVar[dict | None] = ContextVar("vmap_minor_out_flags", default=None)
 
 
 def vmap_minor(fun: Callable, in_axes: int | None | Sequence = 0, out_axes: int = 0,
@@ -119,7 +123,12 @@ def batch_last(fun: Callable, in_axes: int | None | Sequence = -1,
                    for x, b in zip(flat, flags)]
         closed, out_shape = jax.make_jaxpr(
             lambda *leaves: fun(*jax.tree.unflatten(tree, leaves)), return_shape=True)(*example)
-        outs = _differentiable(closed.jaxpr, flags, size)(closed.consts, flat)
+        token = _OUT_FLAGS_MEMO.set({}) if _OUT_FLAGS_MEMO.get() is None else None
+        try:
+            outs = _differentiable(closed.jaxpr, flags, size)(closed.consts, flat)
+        finally:
+            if token is not None:
+                _OUT_FLAGS_MEMO.reset(token)
         return jax.tree.unflatten(jax.tree.structure(out_shape), outs)
 
     return batched
@@ -411,7 +420,18 @@ def _call(eqn, vals, batched, size, **params):
 
 def out_flags(jaxpr, flags) -> list:
     """Which outputs of `jaxpr` are batched for inputs batched as `flags`: any batched input
-    batches every output, except through calls and loops, which are followed inside."""
+    batches every output, except through calls and loops, which are followed inside.
+    Remembered for the trace of one `batch_last` call (`_OUT_FLAGS_MEMO`)."""
+    memo = _OUT_FLAGS_MEMO.get()
+    key = (jaxpr, tuple(map(bool, flags)))
+    if memo is None:
+        return _out_flags(jaxpr, key[1])
+    if key not in memo:
+        memo[key] = _out_flags(jaxpr, key[1])
+    return list(memo[key])
+
+
+def _out_flags(jaxpr, flags: tuple[bool, ...]) -> list:
     env = dict(zip(jaxpr.invars, flags))
     read = lambda v: False if isinstance(v, core.Literal) else env.get(v, False)  # noqa: E731
     for eqn in jaxpr.eqns:

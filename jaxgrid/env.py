@@ -457,7 +457,8 @@ class LoadSheddingEnv:
         return history.reshape(-1), new, reward, done, info
 
     def state_after(self, task: Task, params: EnvParams, grid: GridModel, steps: int):
-        """The state after `steps` (static) agent steps without shedding, from reset."""
+        """The state after `steps` agent steps (an int, or a traced integer: one program for
+        any count) without shedding, from reset."""
         _, state = self.reset(None, task, params, grid)
         zero = jnp.zeros(len(self.action_slots), grid.load_p0.dtype)
         return jax.lax.fori_loop(0, steps, lambda _, s: self.step(s, zero, params, grid)[1],
