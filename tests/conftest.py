@@ -4,7 +4,12 @@ paths to reference data.
 XLA compiles take most of the suite's time (measured: 60 % of the CPU time of the heaviest
 files), so the tests compile with XLA's backend optimisation level 0 (LLVM unoptimised: a
 third less CPU time on test_ars, a fifth on test_gridpack_reference's six-second runs; the
-arithmetic is the same IEEE arithmetic) unless XLA_FLAGS sets a level, and they share one
+arithmetic is the same IEEE arithmetic) and with XLA:CPU's loop emitters in place of its
+newer fusion emitters (`--xla_cpu_use_fusion_emitters=false`: test_ars 15-16 s instead of
+25-26 s, test_reproduce with test_step_accuracy 179 s instead of 243 s, measured alternately
+in one run; XLA:CPU's older code generator for fused loops, whose results agree to float
+rounding: the suite passes with either), each unless XLA_FLAGS sets it; `make bench` and the
+experiments run with XLA's defaults. They share one
 persistent compilation cache per run: a program compiled by one test file, one pytest-xdist
 worker or one process a test starts is loaded, not compiled again, by the others (a fresh
 folder, removed at the end; set JAX_COMPILATION_CACHE_DIR to keep one across runs). These
@@ -19,8 +24,10 @@ import tempfile
 
 _flags = [flag for flag in os.environ.get("XLA_FLAGS", "").split()
           if not flag.startswith("--xla_force_host_platform_device_count")]
-if not any(flag.startswith("--xla_backend_optimization_level") for flag in _flags):
-    _flags.append("--xla_backend_optimization_level=0")
+for _name, _value in (("--xla_backend_optimization_level", "0"),
+                      ("--xla_cpu_use_fusion_emitters", "false")):
+    if not any(flag.startswith(_name) for flag in _flags):
+        _flags.append(f"{_name}={_value}")
 os.environ["XLA_FLAGS"] = " ".join(_flags + ["--xla_force_host_platform_device_count=2"])
 if "JAX_COMPILATION_CACHE_DIR" not in os.environ:  # set here: workers and processes inherit
     os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxgrid-tests-xla-")
