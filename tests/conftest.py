@@ -9,12 +9,12 @@ newer fusion emitters (`--xla_cpu_use_fusion_emitters=false`: test_ars 15-16 s i
 25-26 s, test_reproduce with test_step_accuracy 179 s instead of 243 s, measured alternately
 in one run; XLA:CPU's older code generator for fused loops, whose results agree to float
 rounding: the suite passes with either), each unless XLA_FLAGS sets it; `make bench` and the
-experiments run with XLA's defaults. They share one
-persistent compilation cache per run: a program compiled by one test file, one pytest-xdist
-worker or one process a test starts is loaded, not compiled again, by the others (a fresh
-folder, removed at the end; set JAX_COMPILATION_CACHE_DIR to keep one across runs). These
-environment variables must be set before JAX is imported anywhere, hence at the top here;
-the processes the tests start inherit them.
+experiments run with XLA's defaults. They share one persistent compilation cache per run: a
+program compiled by one test file, one pytest-xdist worker or one process a test starts is
+loaded, not compiled again, by the others (a fresh folder, removed at the end; set
+JAX_COMPILATION_CACHE_DIR to keep one across runs). These environment variables must be set
+before JAX is imported anywhere, hence at the top here; the processes the tests start
+inherit them.
 """
 import atexit
 import os
