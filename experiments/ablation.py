@@ -26,7 +26,9 @@ The file (TOML; paths relative to it):
     why = "a network the study published, evaluated as is"
 
 A row with a `controller` (an `experiments.evaluate` spec; a path after its prefix relative to
-the file) trains nothing: that controller is scored as one seed. Each row's seeds train as one program in a run folder named by the study and the training
+the file) trains nothing: that controller is scored as one seed; a list of specs is scored as
+that many seeds (e.g. the seeds of a training made elsewhere, or before a change to the
+simulator). Each row's seeds train as one program in a run folder named by the study and the training
 (`experiments.reproduce.runs.Runs`: a finished row is reused, an interrupted one resumes);
 every seed's final policy, no control and UVLS are evaluated on each task set in the row's
 own study (its environment binds every controller alike; evaluations are cached), and scored
@@ -58,14 +60,14 @@ SUBSET_KEYS = {"of", "points", "why"}
 
 @dataclasses.dataclass(frozen=True)
 class Row:
-    """One configuration: name, study file (absolute), experiments.train flags, why; or a
-    fixed controller spec (its path absolute) evaluated instead of a training."""
+    """One configuration: name, study file (absolute), experiments.train flags, why; or
+    fixed controller specs (paths absolute), one per seed, evaluated instead of a training."""
 
     name: str
     study: str
     flags: tuple[str, ...]
     why: str
-    controller: str | None = None
+    controllers: tuple[str, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,20 +123,28 @@ def read_spec(path: str | Path) -> Spec:
         if not all(isinstance(f, str) for f in flags):
             raise ValueError(f"{where}.flags = {flags!r}: must be a list of strings")
         controller = row.get("controller")
-        if controller is not None:
-            if not isinstance(controller, str) or flags:
-                raise ValueError(f"{where}.controller = {controller!r}: a controller spec "
-                                 "string, in a row without flags")
-            kind, sep, target = controller.partition(":")
-            if sep and kind in ("policy", "ppo", "rlgc"):
-                controller = f"{kind}:{(path.parent / target).resolve()}"
+        listed = [controller] if isinstance(controller, str) else controller
+        if controller is not None and (flags or not isinstance(listed, list) or not listed
+                                       or not all(isinstance(c, str) for c in listed)):
+            raise ValueError(f"{where}.controller = {controller!r}: a controller spec string "
+                             "or a non-empty list of them (one per seed), in a row without "
+                             "flags")
         rows.append(Row(row["name"], str(study), tuple(flags), row.get("why", ""),
-                        controller))
+                        tuple(_beside(path, c) for c in listed or ())))
     names = [r.name for r in rows]
     if len(set(names)) < len(names):
         raise ValueError(f"{path}: rows: a name used twice in {names}")
     return Spec(path, (path.parent / data["out"]).resolve(), data["seeds"], data["iterations"],
                 tuple(data["task_sets"]), tuple(rows), _subsets(path, data.get("subsets", {})))
+
+
+def _beside(path: Path, controller: str) -> str:
+    """A controller spec with its file (after policy:, ppo: or rlgc:) made absolute,
+    relative to the ablation file `path`."""
+    kind, sep, target = controller.partition(":")
+    if sep and kind in ("policy", "ppo", "rlgc"):
+        return f"{kind}:{(path.parent / target).resolve()}"
+    return controller
 
 
 def _subsets(path: Path, data) -> tuple[Subset, ...]:
@@ -176,8 +186,8 @@ def run_row(spec: Spec, row: Row, train: bool, studies: dict) -> dict | None:
         studies[row.study] = Runs(row.study, spec.out / Path(row.study).stem, FULL)
     runs = studies[row.study]
     folder = None
-    if row.controller is not None:
-        controllers = [row.controller]
+    if row.controllers:
+        controllers = list(row.controllers)
     else:
         chosen = choices(spec, row)
         folder = runs.choices_folder(f"pars_{row.name}", chosen)
@@ -218,7 +228,7 @@ def table(spec: Spec, results: dict) -> str:
              "Per task set: *need* = tasks no control fails, *ok* = tasks it recovers. "
              "wins: reward above UVLS's on need tasks; rec.: need tasks recovered (UVLS's in "
              "brackets); sheds on: ok tasks with >= 1 MW shed; MW: shed per task of the kind. "
-             "Mean over seeds, range in brackets (a controller row: its one value); "
+             "Mean over seeds, range in brackets (a row of one seed: its one value); "
              "targets: seeds meeting all three "
              "(wins >= 95 %, rec. >= UVLS, sheds on <= 5 % of ok).", ""]
     headings = {name: name for name in spec.task_sets}
