@@ -26,9 +26,10 @@ The file (TOML; paths relative to it):
     why = "a network the study published, evaluated as is"
 
 A row with a `controller` (an `experiments.evaluate` spec; a path after its prefix relative to
-the file) trains nothing: that controller is scored as one seed; a list of specs is scored as
-that many seeds (e.g. the seeds of a training made elsewhere, or before a change to the
-simulator). Each row's seeds train as one program in a run folder named by the study and the training
+the file) trains nothing: that controller is scored as one seed; a list of specs
+(`controller = ["policy:runs/a/seed0", "policy:runs/b/seed0"]`) is scored as that many seeds,
+e.g. the seeds of a training made elsewhere, or before a change to the simulator. Each row's
+seeds train as one program in a run folder named by the study and the training
 (`experiments.reproduce.runs.Runs`: a finished row is reused, an interrupted one resumes);
 every seed's final policy, no control and UVLS are evaluated on each task set in the row's
 own study (its environment binds every controller alike; evaluations are cached), and scored
