@@ -443,3 +443,21 @@ def to_rows(case: Case) -> dict[str, Any]:
         generators=rows(case.generators, _INTERNAL_BUS_FIELDS[Generators]),
         branches=rows(case.branches, _INTERNAL_BUS_FIELDS[Branches]),
         areas=case.areas, zones=case.zones, skipped=case.skipped, notes=case.notes)
+
+
+LOAD_POWER_FIELDS = ("p_power", "q_power", "p_current", "q_current", "p_impedance",
+                     "q_impedance")  # every ZIP part of a load (p.u.)
+
+
+def at_load_level(case: Case, level: float, name: str, source: str) -> Case:
+    """`case` with every load (P and Q, all ZIP parts) and every generator's P dispatch
+    times `level`, renamed `name` from `source`; the slack takes the change in losses when
+    its power flow is solved. Machine data and reactive limits are unchanged."""
+    rows = to_rows(case)
+    for load in rows["loads"]:
+        for key in LOAD_POWER_FIELDS:
+            load[key] = load[key] * level
+    for gen in rows["generators"]:
+        gen["pg"] = gen["pg"] * level
+    rows.update(name=name, source=source)
+    return build_case(**rows)

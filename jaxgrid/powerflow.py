@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxgrid.case import ISOLATED, PQ, PV, SLACK, Case
+from jaxgrid.case import ISOLATED, PQ, PV, SLACK, Case, build_case, to_rows
 
 
 class PowerFlowError(RuntimeError):
@@ -247,6 +247,18 @@ def _dispatch(case: Case, s_gen_bus: np.ndarray, on: np.ndarray):
     qg = np.where(span[b] > 0, gen.qmin + share * (gen.qmax - gen.qmin),
                   s_gen_bus.imag[b] / np.maximum(count[b], 1))
     return pg, np.where(on, qg, 0.0)
+
+
+def with_reactive_room(case: Case) -> Case:
+    """`case` with each generator's [Qmin, Qmax] widened to hold its reactive output in the
+    power flow solved without reactive limits, so the set points hold at a heavier load (the
+    PNNL 300-bus `baseCases` files raise QMAX so, on 36-49 units). PowerFlowError if even
+    that power flow does not converge."""
+    flow = solve(case, PowerFlowOptions(enforce_q_limits=False))
+    rows = to_rows(case)
+    for gen, q in zip(rows["generators"], flow.qg):
+        gen.update(qmax=max(gen["qmax"], float(q)), qmin=min(gen["qmin"], float(q)))
+    return build_case(**rows)
 
 
 def solve(case: Case, options: PowerFlowOptions = PowerFlowOptions()) -> PowerFlowResult:

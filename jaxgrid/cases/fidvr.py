@@ -79,7 +79,7 @@ import functools
 import math
 import numpy as np
 
-from jaxgrid.case import SLACK, Case, build_case, to_rows
+from jaxgrid.case import SLACK, Case, at_load_level, build_case, to_rows
 from jaxgrid.cases.registry import register
 from jaxgrid.cases.ieee import ieee39, ieee300, move_loads_behind_transformers
 from jaxgrid.models.acmotor import Acmtblu1
@@ -222,7 +222,8 @@ def ieee39_fidvr(load_level: float = 1.0) -> StudyCase:
     TGOV1/HYGOV (StudyCase.description)."""
     level = _check_level(load_level, "ieee39_fidvr")
     base, mbase = _ieee39_base()
-    case = _at_level(base, level, "ieee39_fidvr")
+    case = at_load_level(base, level, f"ieee39_fidvr_load{100 * level:g}",
+                         "jaxgrid.cases.ieee39_fidvr")
     gen = case.generators
     buses = [int(case.buses.number[b]) for b in gen.bus]
     records = []
@@ -252,7 +253,8 @@ def ieee300_fidvr(load_level: float = 1.0) -> StudyCase:
     GENROU + IEEET1 + TGOV1 (StudyCase.description)."""
     level = _check_level(load_level, "ieee300_fidvr")
     base, observed = _ieee300_base()
-    case = _at_level(base, level, "ieee300_fidvr")
+    case = at_load_level(base, level, f"ieee300_fidvr_load{100 * level:g}",
+                         "jaxgrid.cases.ieee300_fidvr")
     gen = case.generators
     motor_buses = tuple(LOAD_BUS_OFFSET_300 + b for b in MOTOR_BUSES_300)
     condenser = (gen.pg == 0) & (case.buses.kind[gen.bus] != SLACK)
@@ -277,7 +279,7 @@ def ieee300_fidvr(load_level: float = 1.0) -> StudyCase:
 
 
 # --------------------------------------------------------------------------- #
-# Networks at load level 1 (cached) and at other levels
+# Networks at load level 1 (cached)
 # --------------------------------------------------------------------------- #
 
 @functools.lru_cache(maxsize=None)
@@ -322,19 +324,6 @@ def _with_machine_bases(case: Case, xppd) -> tuple[Case, np.ndarray]:
     for g, m in zip(rows["generators"], mbase):
         g.update(mbase=float(m), zr=0.0, zx=float(xppd(int(g["bus"]), float(m))))
     return build_case(**rows), mbase
-
-
-def _at_level(case: Case, level: float, name: str) -> Case:
-    """Every load (P, Q, all ZIP parts) and generator P dispatch times `level`, renamed."""
-    rows = to_rows(case)
-    for ld in rows["loads"]:
-        for key in ("p_power", "q_power", "p_current", "q_current", "p_impedance",
-                    "q_impedance"):
-            ld[key] = ld[key] * level
-    for g in rows["generators"]:
-        g["pg"] = g["pg"] * level
-    rows.update(name=f"{name}_load{100 * level:g}", source=f"jaxgrid.cases.{name}")
-    return build_case(**rows)
 
 
 def _check_level(load_level, name: str) -> float:

@@ -17,13 +17,14 @@ Built three ways:
   built-in: `jaxgrid.cases` FIDVR study cases ("ieee39_fidvr", "ieee300_fidvr") at one or
     more load levels; buses, step, reward values and task sets are the case's.
   from files: RAW files (the operating points; one grid, so bus, branch, load and machine
-    structure must agree), one DYR, optionally a PNNL task JSON (buses, reward, history,
+    structure must agree; the first again at `base_load_levels`, factors on its loads and
+    dispatch), one DYR, optionally a PNNL task JSON (buses, reward, history,
     training faults: `jaxgrid.study.pnnl`) and a PNNL simulation JSON (step, episode length).
   study file (TOML, `read_study`): names the built-in or the files (paths relative to the
     file, RAW paths may be glob patterns) and overrides any field of the definition:
 
         name = "ieee39_pnnl"
-        [grid]      builtin, load_levels | raw, dyr, task_config, sim_config
+        [grid]      builtin, load_levels | raw, base_load_levels, dyr, task_config, sim_config
         [compile]   strict, precision, sweeps (the solver's), [compile.motors], [compile.loads]
         [env]       jaxgrid.env.EnvConfig fields (observed_buses, action_buses, agent_dt,
                     episode, history, include_action_status, recovery_buses, [env.bounds])

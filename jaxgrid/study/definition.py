@@ -38,12 +38,17 @@ class GridSource:
       builtin: a `jaxgrid.cases` FIDVR study case name, or None.
       load_levels: the built-in's operating points (factor on loads and dispatch).
       raw: RAW files, one per operating point.  dyr: the DYR file.
+      base_load_levels: more operating points of a study from files, after the RAW files':
+        the first RAW file with every load and generator P dispatch times each factor
+        (`jaxgrid.case.at_load_level`) and the units' reactive limits widened to what that
+        needs, as the PNNL `baseCases` "scalepercent" files are made.
       task_config, sim_config: PNNL task and simulation JSON files, or None.
     """
 
     builtin: str | None = None
     load_levels: tuple[float, ...] = (1.0,)
     raw: tuple[str, ...] = ()
+    base_load_levels: tuple[float, ...] = ()
     dyr: str | None = None
     task_config: str | None = None
     sim_config: str | None = None
@@ -54,15 +59,18 @@ class GridSource:
         check_listed("load_levels", self.load_levels, "load level")
         check_each("load_levels", self.load_levels, LOAD_LEVEL)
         check_unique("raw", self.raw)  # one file twice would be one operating point twice
-        files = {k: v for k, v in (("raw", self.raw), ("dyr", self.dyr),
-                                   ("task_config", self.task_config),
+        check_unique("base_load_levels", self.base_load_levels)
+        check_each("base_load_levels", self.base_load_levels, LOAD_LEVEL)
+        files = {k: v for k, v in (("raw", self.raw), ("base_load_levels", self.base_load_levels),
+                                   ("dyr", self.dyr), ("task_config", self.task_config),
                                    ("sim_config", self.sim_config)) if v}
         if self.builtin and files:
             raise InputError("builtin", self.builtin, f"a built-in study reads no files: leave "
                              f"out {', '.join(files)}, or builtin for a study from files")
         if self.raw and tuple(self.load_levels) != (1.0,):
             raise InputError("load_levels", list(self.load_levels), "set a built-in study's "
-                             "operating points; a study from files has one per RAW file")
+                             "operating points; a study from files has one per RAW file and "
+                             "per base_load_levels factor")
 
 
 LOAD_LEVEL = Range(0.0, 10.0, "(factor on loads and dispatch)", lo_open=True)

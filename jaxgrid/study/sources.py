@@ -1,9 +1,9 @@
 """Where a study's operating points and defaults come from: one `SourceDefaults` per source.
 
 `builtin_source(grid)`: a `jaxgrid.cases` FIDVR `StudyCase` per load level.
-`file_source(grid)`: RAW files (one grid), a DYR, and optionally a PNNL task JSON and a PNNL
-simulation JSON (`jaxgrid.study.pnnl`), whose bus references are resolved here
-(`jaxgrid.study.names`). Each turns its source-specific input into `SourceDefaults` at this
+`file_source(grid)`: RAW files (one grid; the first also at `grid.base_load_levels`), a DYR,
+and optionally a PNNL task JSON and a PNNL simulation JSON (`jaxgrid.study.pnnl`), whose bus
+references are resolved here (`jaxgrid.study.names`). Each turns its source-specific input into `SourceDefaults` at this
 one place; `jaxgrid.study.build` lays the overrides over them into the `StudyDefinition`.
 `fault_set(task, buses)`: a PNNL task file's fault candidates alone, as a `TaskSet`.
 """
@@ -15,12 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from jaxgrid import cases
-from jaxgrid.case import Case
+from jaxgrid.case import Case, at_load_level
 from jaxgrid.checks import InputError, renamed_errors
 from jaxgrid.env import EnvConfig
 from jaxgrid.grid import GridModel
 from jaxgrid.io.dyr import read_dyr
 from jaxgrid.io.raw import read_raw
+from jaxgrid.powerflow import with_reactive_room
 from jaxgrid.records import DyrData
 from jaxgrid.study import pnnl
 from jaxgrid.study.definition import PAPER_HISTORY, GridSource
@@ -102,7 +103,10 @@ def builtin_source(grid: GridSource) -> SourceDefaults:
 
 
 def file_source(grid: GridSource) -> SourceDefaults:
-    """The study of `grid.raw` (one grid), `grid.dyr` and the PNNL JSON files named."""
+    """The study of `grid.raw` (one grid; the first RAW file again at each of
+    `grid.base_load_levels`, after them, its units' reactive limits widened to what the
+    level needs: `jaxgrid.powerflow.with_reactive_room`), `grid.dyr` and the PNNL JSON files
+    named."""
     points, stems = [], {}
     for path in grid.raw:
         stem = Path(path).stem
@@ -114,6 +118,11 @@ def file_source(grid: GridSource) -> SourceDefaults:
         difference = structure_difference(first.case, point.case)
         if difference:
             raise ValueError(f"{point.source} and {first.source} are not one grid: {difference}")
+    for level in grid.base_load_levels:
+        label = f"{first.label}_load{100 * level:g}"
+        source = f"{first.source} (loads and dispatch x {level:g})"
+        case = with_reactive_room(at_load_level(first.case, level, label, source))
+        points.append(SourcePoint(label, source, case))
     dyr = read_dyr(grid.dyr)
     source = SourceDefaults(name=Path(grid.task_config or grid.raw[0]).stem,
                             points=tuple(points), dyr=dyr, buses=bus_table(first.case, dyr),

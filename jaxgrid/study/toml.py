@@ -48,7 +48,7 @@ def read_study(path: str | Path, raw=None) -> Study:
     """A study from its TOML file (format: `jaxgrid.study`); errors name the file, key and
     value. `raw`: RAW files (one per operating point) in place of the file's grid.raw: its
     settings (buses, reward, steps, history, fault sets) at other operating points of its
-    grid, every task set at all of them (a set's operating_points index the file's points),
+    grid (and not its grid.base_load_levels), every task set at all of them (a set's operating_points index the file's points),
     so a policy trained on the study runs there (`--study FILE --raw R ...`)."""
     path = Path(path)
     data = _file_tables(path)
@@ -58,6 +58,7 @@ def read_study(path: str | Path, raw=None) -> Study:
             raise ValueError(f"{path}: grid.builtin = {grid['builtin']!r}: a built-in's operating "
                              "points are load levels (--load-levels), not RAW files")
         grid["raw"] = [str(Path(r).resolve()) for r in raw]
+        grid.pop("base_load_levels", None)  # levels of the file's base case, not of these
     elif "raw" in grid:
         grid["raw"] = [str(p) for file, r in grid["raw"] for p in _paths(file.parent, r, file)]
     source = _typed(GridSource, grid, path, "grid")
