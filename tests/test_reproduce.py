@@ -156,6 +156,25 @@ def test_a_given_policy_is_kept_and_otherwise_the_trained_one_is_exported(quick,
     assert "given" not in json.loads(info_path.read_text())
 
 
+def test_a_policy_of_another_study_is_kept_and_named_in_the_report(quick, tmp_path):
+    """OUT/policy trained on another study (an ablation's best configuration, committed on
+    purpose) is not replaced by the main training's best seed, even when an experiment
+    evaluated that one, and the report says what it is."""
+    out = tmp_path / "out"
+    shutil.copytree(quick, out)
+    info_path = out / "policy" / "policy.json"
+    info_path.write_text(json.dumps({**json.loads(info_path.read_text()),
+                                     "study": "elsewhere", "task_set": "train_levels"}))
+    evaluating = Runs(str(out / "study.toml"), out, QUICK)
+    evaluating.main_policy()
+    assert evaluating.export_policy() is None
+    assert json.loads(info_path.read_text())["study"] == "elsewhere"
+    write_report(out, QUICK, quick=True, study=evaluating.study.name)
+    report = (out / "REPORT.md").read_text()
+    assert ("`policy/` holds a policy trained on the study `elsewhere` (task set "
+            "`train_levels`), not this report's main training") in report
+
+
 def test_the_report_says_when_its_policy_is_from_an_unfinished_training(quick, tmp_path):
     """A policy copied from a checkpoint of a training that stopped short (its policy.json:
     iteration < iterations) is named as such at the top of the report."""

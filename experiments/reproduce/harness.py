@@ -83,21 +83,23 @@ def run(study: str, out: str | Path, only=None, quick: bool = False, **overrides
     policy = runs.export_policy()
     if policy is not None:
         print(f"policy: {policy}", flush=True)
-    write_report(runs.out, dataclasses.replace(settings, directions=runs.directions), quick)
+    write_report(runs.out, dataclasses.replace(settings, directions=runs.directions), quick,
+                 runs.study.name)
     return results
 
 
-def write_report(out: Path, settings, quick: bool) -> None:
+def write_report(out: Path, settings, quick: bool, study: str | None = None) -> None:
     """REPORT.md from every OUT/<id>.json there (this run's and earlier ones), and OUT/NOTES.md
     at its end when there is one: what was measured to explain the numbers, written by hand,
-    kept across runs."""
+    kept across runs. `study`: the study the main training ran on (what OUT/policy is
+    compared with)."""
     lines = ["# PARS paper reproduction", "",
              f"Settings: {'--quick (a pipeline check, not results)' if quick else 'full'}; "
              f"{json.dumps(dataclasses.asdict(settings))}.", "",
              "Each experiment ran on the study named under it; the paper's values are for the "
              "paper's case and settings, given beside ours.", ""]
     if (out / "policy" / "policy.json").is_file():
-        lines += [_policy_line(out / "policy"), ""]
+        lines += [_policy_line(out / "policy", study), ""]
     for name in EXPERIMENTS:
         path = out / f"{name}.json"
         if not path.is_file():
@@ -120,11 +122,16 @@ def write_report(out: Path, settings, quick: bool) -> None:
     (out / "REPORT.md").write_text("\n".join(lines))
 
 
-def _policy_line(folder: Path) -> str:
-    """What OUT/policy holds: the best seed of the main LSTM training, or, when its
-    policy.json says the training stopped short, the iteration it is from."""
+def _policy_line(folder: Path, study: str | None) -> str:
+    """What OUT/policy holds: the best seed of the main LSTM training on `study`, a policy of
+    another study (committed on purpose, `Runs.export_policy`), or, when its policy.json
+    says the training stopped short, the iteration it is from."""
     info = json.loads((folder / "policy.json").read_text())
     use = f"(`python -m experiments.evaluate --controller policy:{folder} ...`)"
+    if study is not None and info.get("study", study) != study:
+        return (f"`policy/` holds a policy trained on the study `{info['study']}` (task set "
+                f"`{info.get('task_set')}`), not this report's main training: the notes say "
+                f"why {use}.")
     done, total = info.get("iteration"), info.get("iterations")
     if done is not None and total is not None and done < total:
         return (f"`policy/` holds the main LSTM training's policy after iteration {done} of "

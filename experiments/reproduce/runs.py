@@ -249,12 +249,16 @@ class Runs:
         """Copy the best seed of the finished main LSTM training to OUT/policy (loadable by
         `experiments.evaluate --controller policy:OUT/policy`); None if it is not trained, if
         a policy was given (`settings.policy`: the experiments used that one, so OUT/policy
-        is left as it is, e.g. when a redraw passes `--policy OUT/policy`), or if OUT/policy
+        is left as it is, e.g. when a redraw passes `--policy OUT/policy`), if OUT/policy
         exists and no experiment here evaluated the trained one (a training-curve redraw such
-        as `--only fig6b` keeps the policy that the report's evaluations were measured with)."""
+        as `--only fig6b` keeps the policy that the report's evaluations were measured with),
+        or if OUT/policy is a policy of another study (one committed on purpose: an ablation's
+        best configuration)."""
         target = self.out / "policy"
-        if self.settings.policy or (
-                (target / "policy.json").is_file() and not self.main_policy_evaluated):
+        existing = target / "policy.json"
+        if self.settings.policy or (existing.is_file() and (
+                not self.main_policy_evaluated
+                or json.loads(existing.read_text()).get("study") != self.study.name)):
             return None
         folder = self.pars_folder("lstm", self.directions)
         if not self.pars_finished(folder):
