@@ -69,17 +69,27 @@ def merge(stats: RunningStats, count, total, total_sq) -> RunningStats:
 
 def normalized_policy(policy: Policy, network: Callable = lambda fun: fun):
     """policy_apply(params, obs, carry, inputs) with params = (θ, mean, std) that normalises
-    the observation and accumulates its sums (count, Σx, Σx²) in the carry; `inputs`, what
+    the policy's input and accumulates its sums (count, Σx, Σx²) in the carry; `inputs`, what
     else the episode gives its controllers (e.g. `jaxgrid.episode.ControlInputs`), is unused.
-    The network runs as `network(policy.apply)`: the problem's wrap of a per-example network
+    The input is the observation, or with `spec.relative_inputs` the observation less the
+    episode's first one (held in the carry beside the network's). The network runs as
+    `network(policy.apply)`: the problem's wrap of a per-example network
     (`ars.train.Problem.network`; default as it is)."""
     net = network(policy.apply)
+    relative = policy.spec.relative_inputs
 
     def apply(params, obs, carry, inputs):
         theta, mean, std = params
         net_carry, (count, total, total_sq) = carry
-        action, net_carry = net(theta, (obs - mean) / std, net_carry)
-        c, s, s2 = sums(obs)
+        x = obs
+        if relative:
+            net_carry, first = net_carry
+            first = jnp.where(count > 0, first, obs)  # nothing summed yet: the first call
+            x = obs - first
+        action, net_carry = net(theta, (x - mean) / std, net_carry)
+        if relative:
+            net_carry = (net_carry, first)
+        c, s, s2 = sums(x)
         return action, (net_carry, (count + c, total + s, total_sq + s2))
 
     return apply
@@ -88,4 +98,7 @@ def normalized_policy(policy: Policy, network: Callable = lambda fun: fun):
 def initial_carry(policy: Policy):
     """The carry `normalized_policy` starts an episode with."""
     n = policy.spec.obs_size
-    return policy.initial_carry(), (jnp.zeros(()), jnp.zeros(n), jnp.zeros(n))
+    net_carry = policy.initial_carry()
+    if policy.spec.relative_inputs:
+        net_carry = (net_carry, jnp.zeros(n))
+    return net_carry, (jnp.zeros(()), jnp.zeros(n), jnp.zeros(n))

@@ -31,6 +31,9 @@ class PolicySpec:
         network, or None: not clipped, as the paper's Algorithm 1. A clip keeps inputs far
         outside what training saw (a bus that hardly moved under the training faults has a
         tiny std) from driving the policy out of its trained range.
+      relative_inputs: the network reads each input as its change since the episode's
+        first observation (`ars.normalizer.normalized_policy`), not as it is (the paper's):
+        before a fault every operating point then looks alike to it.
     """
 
     kind: str
@@ -40,6 +43,7 @@ class PolicySpec:
     action_low: float = -0.2
     action_high: float = 0.0
     obs_clip: float | None = None
+    relative_inputs: bool = False
 
     def __post_init__(self):
         if self.kind not in KINDS:

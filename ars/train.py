@@ -50,6 +50,8 @@ class TrainConfig:
       out: the output folder.  resume: continue from the last checkpoint in `out`.
       obs_clip: the policy's inputs clipped to ±obs_clip standard deviations, or None
         (`ars.policies.PolicySpec.obs_clip`).
+      relative_inputs: the policy reads its inputs as their change since the episode's
+        start (`ars.policies.PolicySpec.relative_inputs`; the paper's: False).
     """
 
     policy: str = "lstm"
@@ -61,6 +63,7 @@ class TrainConfig:
     out: str = "runs/study"
     resume: bool = False
     obs_clip: float | None = None
+    relative_inputs: bool = False
 
     def __post_init__(self):
         if self.iterations < 1 or self.checkpoint_every < 1 or (self.seeds or 1) < 1:
@@ -121,7 +124,8 @@ def make_trainer(problem: Problem, config: TrainConfig, mesh=None) -> Trainer:
     """The policy of `config` on the problem's sizes and its PARS iteration, the problem's
     episodes sharded over `mesh` (default: all devices)."""
     spec = PolicySpec(config.policy, problem.obs_size, problem.action_size, config.hidden,
-                      float(problem.action_low), float(problem.action_high), config.obs_clip)
+                      float(problem.action_low), float(problem.action_high), config.obs_clip,
+                      config.relative_inputs)
     policy, pars, mesh = Policy(spec), config.pars, mesh or default_mesh()
     evaluate = problem.evaluator(normalized_policy(policy, problem.network),
                                  initial_carry(policy), mesh, task_batch=pars.task_batch,
@@ -170,8 +174,10 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
             raise ValueError(f"--resume: no checkpoint in {out / 'checkpoints'}")
         state, meta = restored
         log = meta["metrics"]
-        for flag, value in (("seeds", config.seeds), ("obs_clip", config.obs_clip)):
-            if meta.get(flag) != value:
+        for flag, value, unsaved in (("seeds", config.seeds, None),
+                                     ("obs_clip", config.obs_clip, None),
+                                     ("relative_inputs", config.relative_inputs, False)):
+            if meta.get(flag, unsaved) != value:  # unsaved: a run from before the flag
                 raise ValueError(f"--resume: the run in {out} has --{flag.replace('_', '-')} "
                                  f"{meta.get(flag)}, not {value}")
     primary = jax.process_index() == 0
@@ -206,7 +212,8 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
                             best=f"{np.max(row['reward_max']):.1f}", s_per_it=f"{wall:.2f}")
             bar.update(1)
             last = done == config.iterations
-            checkpoint.save(mgr, state, {"metrics": log, **run_info, "obs_clip": config.obs_clip},
+            checkpoint.save(mgr, state, {"metrics": log, **run_info, "obs_clip": config.obs_clip,
+                                         "relative_inputs": config.relative_inputs},
                             force=last, step=done)
             if primary and (done % config.checkpoint_every == 0 or last):
                 save_policies(out / "policies" / f"{done:05d}", trainer.spec, state,

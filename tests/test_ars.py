@@ -159,6 +159,39 @@ def test_a_clipped_policy_sees_inputs_beyond_the_clip_as_the_clip(tmp_path):
         PolicySpec("fnn", 3, 2, (8,), -0.2, 0.0, 0.0)
 
 
+def test_relative_inputs_see_the_change_since_the_first_observation(tmp_path):
+    """relative_inputs: two episodes whose observations differ by a constant offset (one
+    operating point and another, before any fault) give the same actions step by step, and
+    the normaliser sums the changes, not the observations; the paper's absolute inputs tell
+    them apart. The switch travels with a saved policy."""
+    from ars.checkpoint import load_policy, save_policy
+
+    relative, plain = (Policy(PolicySpec("lstm", 3, 2, (8,), -0.2, 0.0, None, rel))
+                       for rel in (True, False))
+    theta = jax.random.normal(jax.random.PRNGKey(3), (relative.size,)) * 3
+    params = (theta, jnp.array([0.1, -0.2, 0.3]), jnp.array([0.5, 2.0, 1.0]))
+    steps = jnp.array([[1.0, 0.9, 1.0], [1.0, 0.9, 1.0], [0.7, 0.6, 1.0], [0.8, 0.85, 0.9]])
+    offset = jnp.array([-0.02, 0.05, 0.0])
+
+    def play(policy, observations):
+        apply, carry, actions = normalized_policy(policy), initial_carry(policy), []
+        for obs in observations:
+            action, carry = apply(params, obs, carry, None)
+            actions.append(np.asarray(action))
+        return np.array(actions), carry
+
+    (here, carry), (there, _) = play(relative, steps), play(relative, steps + offset)
+    np.testing.assert_allclose(here, there, atol=1e-6)
+    _, (count, total, total_sq) = carry
+    changes = np.asarray(steps - steps[0])
+    assert float(count) == 4
+    np.testing.assert_allclose(total, changes.sum(0), atol=1e-6)
+    np.testing.assert_allclose(total_sq, (changes ** 2).sum(0), atol=1e-6)
+    assert not np.allclose(play(plain, steps)[0], play(plain, steps + offset)[0], atol=1e-4)
+    save_policy(tmp_path, relative.spec, init_state(relative, ParsConfig()), {})
+    assert load_policy(tmp_path)[0].spec.relative_inputs
+
+
 @pytest.fixture(scope="module")
 def quadratic():
     policy = Policy(PolicySpec("linear", 2, 2, (), -0.2, 0.0))

@@ -34,6 +34,10 @@ def parser(command: str) -> argparse.ArgumentParser:
     p.add_argument("--obs-clip", type=float,
                    help="clip the policy's normalised inputs to ± this many standard "
                         "deviations (default: no clip, as the paper)")
+    p.add_argument("--relative-inputs", action="store_true",
+                   help="the policy reads each input as its change since the episode's first "
+                        "observation, so every operating point looks alike before a fault "
+                        "(default: as it is, the paper's)")
     p.add_argument("--obs-std-floor", type=float,
                    help="the observation normaliser's smallest standard deviation of a "
                         "varying input, in its units (p.u. for voltages; default: none, as "
