@@ -341,6 +341,8 @@ def test_every_field_of_a_definition_is_written(pnnl39, tmp_path):
     assert set(data["params"]) == {f.name for f in dataclasses.fields(EnvParams)}
     assert all(p.startswith("/") for p in data["grid"]["raw"]), "absolute paths"
     assert "builtin" not in data["grid"] and len(data["grid"]["raw"]) == 3
+    assert "base_load_levels" not in data["grid"], \
+        "none: left out, so a study's written text (and its run folders' names) is as before"
 
 
 def test_the_papers_300_bus_system_from_its_files(shared_cases):

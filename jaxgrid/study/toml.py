@@ -135,7 +135,8 @@ def write_study(study: Study | StudyDefinition, path: str | Path) -> None:
 def _as_written(tables: dict) -> dict:
     """The definition's tables as study files have always held them: the environment's
     solver's fields in [env] where the solver stands, but its sweeps in [compile] after
-    precision (the written text, and so the names of run folders, unchanged)."""
+    precision, and [grid] base_load_levels only where there are some (the written text, and
+    so the names of run folders, unchanged)."""
     solver = tables["env"]["solver"]
     env = {}
     for key, value in tables["env"].items():
@@ -146,7 +147,8 @@ def _as_written(tables: dict) -> dict:
         compile_table[key] = value
         if key == "precision":
             compile_table["sweeps"] = solver["sweeps"]
-    return {**tables, "compile": compile_table, "env": env}
+    grid = {k: v for k, v in tables["grid"].items() if k != "base_load_levels" or v}
+    return {**tables, "grid": grid, "compile": compile_table, "env": env}
 
 
 def _plain(value):
