@@ -105,7 +105,8 @@ FILES_VALUES = {("grid", "raw"): (f'["{BASE_RAW}", "{BASE_RAW}"]',
                                   f'"{BASE_RAW}"', f'["{IEEE39}/nothing*.raw"]')}
 # Settings whose entries may repeat or be empty (everything else is checked by class).
 MAY_REPEAT = {"action_p_mw"}     # PnnlTask: one MW value per action bus
-MAY_BE_EMPTY = {"raw"}           # a built-in study's grid has no RAW files
+MAY_BE_EMPTY = {"raw",           # a built-in study's grid has no RAW files
+                "base_load_levels"}  # nor scaled points; a study from files need not
 NOT_SETTINGS = {"notes", "unknown", "counts", "source"}
 
 
@@ -159,7 +160,8 @@ def repeated_or_empty(value, path: str = "") -> str | None:
 def ignored_setting(definition) -> str | None:
     """A [grid] setting the study's source does not read (None if every one is read)."""
     grid = definition.grid
-    if grid.builtin and (grid.raw or grid.dyr or grid.task_config or grid.sim_config):
+    if grid.builtin and (grid.raw or grid.base_load_levels or grid.dyr or grid.task_config
+                         or grid.sim_config):
         return "grid.builtin with files: the files are not read"
     if grid.raw and tuple(grid.load_levels) != (1.0,):
         return f"grid.load_levels = {list(grid.load_levels)} with RAW files: not used"
