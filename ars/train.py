@@ -52,6 +52,8 @@ class TrainConfig:
         (`ars.policies.PolicySpec.obs_clip`).
       relative_inputs: the policy reads its inputs as their change since the episode's
         start (`ars.policies.PolicySpec.relative_inputs`; the paper's: False).
+      self_mask: the policy masks its own requests with the problem's action mask, in
+        training and wherever it runs (`Problem.evaluator`; the paper's: False).
     """
 
     policy: str = "lstm"
@@ -64,6 +66,7 @@ class TrainConfig:
     resume: bool = False
     obs_clip: float | None = None
     relative_inputs: bool = False
+    self_mask: bool = False
 
     def __post_init__(self):
         if self.iterations < 1 or self.checkpoint_every < 1 or (self.seeds or 1) < 1:
@@ -98,14 +101,16 @@ class Problem(Protocol):
     network: Callable
     info: dict
 
-    def evaluator(self, apply: Callable, carry, mesh, *, task_batch: int | None,
-                  compact_after: int | None, compact_chunks: int) -> Callable:
+    def evaluator(self, apply: Callable, carry, mesh, *, self_mask: bool,
+                  task_batch: int | None, compact_after: int | None,
+                  compact_chunks: int) -> Callable:
         """evaluate(thetas (P, size), shared, tasks (m, ...), data) -> dict of (P, m, ...)
         episode results ("reward", "policy_carry", optionally "steps"): each θ's episodes
         run the controller `apply(params, obs, carry, inputs)` with params (θ, *shared) and
         `carry` at the start, the P vectors split over `mesh` and batched as the problem
         sees fit (`ars.iteration.make_iteration`; `ParsConfig` says what the batching fields
-        ask for)."""
+        ask for); self_mask: the controller first drops the requests the problem's action
+        mask would (`TrainConfig.self_mask`)."""
 
     def save(self, folder: Path) -> None:
         """Write what rebuilds the environment into the run folder (process 0, at start)."""
@@ -128,7 +133,8 @@ def make_trainer(problem: Problem, config: TrainConfig, mesh=None) -> Trainer:
                       config.relative_inputs)
     policy, pars, mesh = Policy(spec), config.pars, mesh or default_mesh()
     evaluate = problem.evaluator(normalized_policy(policy, problem.network),
-                                 initial_carry(policy), mesh, task_batch=pars.task_batch,
+                                 initial_carry(policy), mesh, self_mask=config.self_mask,
+                                 task_batch=pars.task_batch,
                                  compact_after=pars.compact_after,
                                  compact_chunks=pars.compact_chunks)
     sample = (problem.sampler(pars.tasks_per_iteration)
@@ -166,7 +172,8 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
                          f"{mgr.latest_step()}, past --iterations {config.iterations}")
     trainer = make_trainer(problem, config, mesh)
     run_info = {**problem.info, "config": dataclasses.asdict(config.pars),
-                "seeds": config.seeds, "iterations": config.iterations}
+                "seeds": config.seeds, "iterations": config.iterations,
+                **({"self_mask": True} if config.self_mask else {})}  # policy.json as before
     state, log = init_state(trainer.policy, config.pars, config.seeds), []
     if config.resume:
         restored = checkpoint.restore_latest(mgr, state)
@@ -176,7 +183,8 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
         log = meta["metrics"]
         for flag, value, unsaved in (("seeds", config.seeds, None),
                                      ("obs_clip", config.obs_clip, None),
-                                     ("relative_inputs", config.relative_inputs, False)):
+                                     ("relative_inputs", config.relative_inputs, False),
+                                     ("self_mask", config.self_mask, False)):
             if meta.get(flag, unsaved) != value:  # unsaved: a run from before the flag
                 raise ValueError(f"--resume: the run in {out} has --{flag.replace('_', '-')} "
                                  f"{meta.get(flag)}, not {value}")

@@ -24,10 +24,8 @@ import warnings
 from collections.abc import Callable
 from typing import Any
 
-import jax.numpy as jnp
-
-from jaxgrid.env import LoadSheddingEnv, mask_passes
-from jaxgrid.episode import idle_controller
+from jaxgrid.env import LoadSheddingEnv
+from jaxgrid.episode import idle_controller, masked
 from jaxgrid.problem import GridProblem, layout
 
 SPECS = "none, uvls, mpc[:OPTIONS], policy:PATH, ppo:PATH or rlgc:FILE"
@@ -131,42 +129,31 @@ def load(spec: str, study, own_mask: bool = True) -> Controller:
 
     A saved policy trained under an action mask (policy.json's "action_mask",
     `EnvConfig.action_mask`) that the study's environment does not apply masks its own
-    requests with it (`own_mask`, `masked`: the supervision it was trained with travels
-    with it, as a relay's arming logic does), with a warning that says so; own_mask=False
-    leaves them unmasked (they then pass otherwise than in training, which the warning
-    says). [choice]; the PNNL study's policies have no mask, so neither changes them."""
+    requests with it (`own_mask`, `jaxgrid.episode.masked`: the supervision it was trained
+    with travels with it, as a relay's arming logic does), with a warning that says so;
+    one trained to mask its own requests (policy.json's "self_mask", `--self-mask`) masks
+    them wherever it runs, under its own mask too, as in training. own_mask=False leaves
+    them unmasked (they then pass otherwise than in training, which the warning says).
+    [choice]; the PNNL study's policies have no mask, so neither changes them."""
     prefix, colon, argument = spec.partition(":")
     takes = ARGUMENT.get(prefix, True)
     if prefix not in LOADERS or (takes is False and colon) or (takes is True and not argument):
         raise ValueError(f"--controller {spec!r}: allowed {SPECS}")
     controller = LOADERS[prefix](spec, argument, study)
     trained, here = controller.info.get("action_mask", "none"), controller.env.config.action_mask
-    if trained in ("none", here):
+    armed = controller.info.get("self_mask", False)
+    if trained == "none" or (trained == here and not armed):
         return controller
-    warnings.warn(f"{spec} was trained with action_mask = {trained!r} (study "
-                  f"{controller.info.get('study')!r}); study {study.name!r} has {here!r}: "
-                  + ("it masks its own requests as in training" if own_mask else
-                     "its requests pass otherwise than in training (own_mask off)"),
-                  stacklevel=2)
+    if trained != here:
+        warnings.warn(f"{spec} was trained with action_mask = {trained!r} (study "
+                      f"{controller.info.get('study')!r}); study {study.name!r} has {here!r}: "
+                      + ("it masks its own requests as in training" if own_mask else
+                         "its requests pass otherwise than in training (own_mask off)"),
+                      stacklevel=2)
     if not own_mask:
         return controller
     return dataclasses.replace(controller, apply=masked(controller.apply, trained,
                                                         controller.env), own_mask=trained)
-
-
-def masked(apply, mask: str, env: LoadSheddingEnv) -> Callable:
-    """`apply` (`Controller.apply`) with its actions at the action buses that `mask` does not
-    let shed (`jaxgrid.env.mask_passes` on the episode's state: the bus voltages at the
-    request and the time since clearing) set to 0 (no shedding)."""
-    agent_dt = env.config.agent_dt
-
-    def apply_masked(params, obs, carry, inputs):
-        action, carry = apply(params, obs, carry, inputs)
-        t = inputs.state.step.astype(inputs.grid.network.real_dtype) * agent_dt
-        passes = mask_passes(mask, inputs.state, t, inputs.params)
-        return jnp.where(passes, action, jnp.zeros_like(action)), carry
-
-    return apply_masked
 
 
 def _saved(spec: str, path: str, kind: str | None) -> str:

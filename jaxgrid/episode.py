@@ -28,7 +28,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from jaxgrid.batching import vmap_minor
-from jaxgrid.env import EnvParams, EnvState, LoadSheddingEnv
+from jaxgrid.env import EnvParams, EnvState, LoadSheddingEnv, mask_passes
 from jaxgrid.grid import GridModel
 from jaxgrid.simulate import Task
 
@@ -101,6 +101,23 @@ def idle_controller(n_action: int) -> Callable:
     """A controller (`play`'s signature) that never sheds at n_action buses; one function per
     size, so a compiled play of it is reused."""
     return lambda params, obs, carry, inputs: (jnp.zeros(n_action), carry)
+
+
+def masked(apply, mask: str, env: LoadSheddingEnv) -> Callable:
+    """The controller `apply` (this module's signature) with its actions at the action buses
+    that `mask` does not let shed (`jaxgrid.env.mask_passes` on the episode's state: the bus
+    voltages at the request and the time since clearing) set to 0 (no request): a policy
+    that masks its own requests, as a relay's arming logic does (`jaxgrid.problem.
+    GridProblem.evaluator`'s self_mask, `baselines.controllers.load`)."""
+    agent_dt = env.config.agent_dt
+
+    def apply_masked(params, obs, carry, inputs: ControlInputs):
+        action, carry = apply(params, obs, carry, inputs)
+        t = inputs.state.step.astype(inputs.grid.network.real_dtype) * agent_dt
+        passes = mask_passes(mask, inputs.state, t, inputs.params)
+        return jnp.where(passes, action, jnp.zeros_like(action)), carry
+
+    return apply_masked
 
 
 def result(loop: EpisodeLoop) -> dict:

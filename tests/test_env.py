@@ -137,7 +137,7 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
     agent step at 1.3 s is 0.22 s after the bus-4 0.08-s fault clears: the 0.8-p.u. level,
     past the hold; the bus voltages of the newest observation are set by hand (0.95, 0.7,
     0.95 p.u.). A policy that masks its own requests sheds, where the environment has no
-    mask, what the masked environment sheds."""
+    mask, what the masked environment sheds, and under the mask is charged no c_normal."""
     request = jnp.array([-0.2, -0.2, 0.0])
     p0 = np.asarray(grid.load_p0)
     out, steps = {}, {}
@@ -168,10 +168,9 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
     assert float(info["shed_pu"]) == pytest.approx(shed_both, rel=1e-6)  # below 0.95: applied
     assert np.asarray(new.action_vm).shape == (3,)
     # a policy trained under a mask, run where the environment has none, masks its own
-    # requests (`baselines.controllers.masked`): the environment without a mask then sheds
+    # requests (`jaxgrid.episode.masked`): the environment without a mask then sheds
     # what the masked one does, at both states
-    from baselines.controllers import masked
-    from jaxgrid.episode import ControlInputs
+    from jaxgrid.episode import ControlInputs, masked
 
     for mask in ("hadrec", "undervoltage"):
         own = masked(lambda params, obs, carry, inputs: (request, carry), mask, study.env())
@@ -182,6 +181,11 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
             _, by_env, _, _, env_info = steps[mask](at, request, EnvParams(), grid)
             assert float(policy_info["shed_pu"]) == float(env_info["shed_pu"]), (mask, at.step)
             np.testing.assert_array_equal(by_policy.grid.load_left, by_env.grid.load_left)
+        # under its own mask (--self-mask) it makes no request in normal operation, so
+        # c_normal charges nothing: the reward the masked environment gives without c_normal
+        action, _ = own(None, None, None, ControlInputs(state, grid, EnvParams(), state.step))
+        _, _, reward, _, _ = steps[mask](state, action, EnvParams(c_normal=3.0), grid)
+        assert float(reward) == pytest.approx(out[mask, 0.0][0], rel=1e-6), mask
 
 
 def test_observations_every_obs_interval_end_with_the_agent_step_s_own(study, grid, tasks):

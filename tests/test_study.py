@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from pathlib import Path
 
 import jax
@@ -318,6 +319,21 @@ def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_pat
         plain = load(f"policy:{folder}", ieee39, own_mask=False)
     assert (own.own_mask, plain.own_mask) == ("hadrec", None)
     assert own.apply is not plain.apply
+
+    class UnderItsMask:  # the study it was trained on: all `load` reads of a study
+        name = "masked"
+
+        def env(self, **changes):
+            return ieee39.env(action_mask="hadrec", **changes)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same mask: nothing to warn of
+        assert load(f"policy:{folder}", UnderItsMask()).own_mask is None
+        info = json.loads((folder / "policy.json").read_text())
+        (folder / "policy.json").write_text(json.dumps({**info, "self_mask": True}))
+        assert load(f"policy:{folder}", UnderItsMask()).own_mask == "hadrec", (
+            "trained with --self-mask: it masks its own requests under its mask too")
+        (folder / "policy.json").write_text(json.dumps(info))
     # the latency benchmark (the reproduction's tab3) times it deciding from a faulted state
     from experiments.bench.controller_latency import bench_study
 

@@ -38,6 +38,12 @@ def parser(command: str) -> argparse.ArgumentParser:
                    help="the policy reads each input as its change since the episode's first "
                         "observation, so every operating point looks alike before a fault "
                         "(default: as it is, the paper's)")
+    p.add_argument("--self-mask", action="store_true",
+                   help="the policy masks its own requests with the study's action mask, in "
+                        "training and wherever it runs, so it never asks to shed where the "
+                        "mask would drop it (and is never charged for it); needs a study with "
+                        "[env] action_mask (default: its requests go to the environment as "
+                        "they are, the paper's)")
     p.add_argument("--obs-std-floor", type=float,
                    help="the observation normaliser's smallest standard deviation of a "
                         "varying input, in its units (p.u. for voltages; default: none, as "

@@ -170,8 +170,9 @@ class Runs:
             inputs["pars"].pop("obs_std_floor")
         if inputs["obs_clip"] is None:  # named as before it
             inputs.pop("obs_clip")
-        if not inputs["relative_inputs"]:  # named as before it
-            inputs.pop("relative_inputs")
+        for flag in ("relative_inputs", "self_mask"):
+            if not inputs[flag]:  # named as before it
+                inputs.pop(flag)
         inputs["pars"]["task_batch"] = self.preset["task_batch"]  # the same on a GPU
         named = {"config": inputs, "history": choices.history,
                  "sampling": choices.task_sampling}
