@@ -16,8 +16,8 @@ compiled, vmapped call. The controllers are `baselines.controllers`'; a saved po
 policy:PATH, PPO: ppo:PATH, a folder written by `experiments.train` or
 `experiments.train_ppo`) must observe and act on the study's buses; a published network
 (rlgc:FILE, `baselines.rlgc`) picks its own buses from the study's observation. A saved
-policy trained under an action mask the study lacks masks its own requests as in training
-(the result then holds "own_mask"; --no-own-mask: unmasked). Where a
+policy trained under an action mask the study lacks, or trained with --self-mask, masks its
+own requests as in training (the result then holds "own_mask"; --no-own-mask: unmasked). Where a
 published file has a training log beside it, each task of the first operating point that
 the log has gains "log_reward" (null for the others), and the result "log" {"path",
 "iteration"}: `experiments.compare` sets them side by side. The work is
@@ -48,8 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--plot", help="folder for figures of the lowest-reward tasks")
     p.add_argument("--plot-count", type=int, default=3)
     p.add_argument("--no-own-mask", dest="own_mask", action="store_false",
-                   help="a saved policy trained under an action mask this study lacks sheds "
-                        "unmasked (default: it masks its own requests as in training)")
+                   help="a saved policy trained under an action mask this study lacks, or "
+                        "with --self-mask, asks unmasked (default: it masks its own requests "
+                        "as in training)")
     args = p.parse_args(argv)
     try:
         study = study_from_args(args)
