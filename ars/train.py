@@ -54,6 +54,9 @@ class TrainConfig:
         start (`ars.policies.PolicySpec.relative_inputs`; the paper's: False).
       self_mask: the policy masks its own requests with the problem's action mask, in
         training and wherever it runs (`Problem.evaluator`; the paper's: False).
+      arming_level: with self_mask, the policy asks nothing until an action bus has been
+        observed below this level (p.u.) after clearing, then is armed for the episode
+        (`Problem.evaluator`), or None (not the paper's: it has no mask).
     """
 
     policy: str = "lstm"
@@ -67,12 +70,19 @@ class TrainConfig:
     obs_clip: float | None = None
     relative_inputs: bool = False
     self_mask: bool = False
+    arming_level: float | None = None
 
     def __post_init__(self):
         if self.iterations < 1 or self.checkpoint_every < 1 or (self.seeds or 1) < 1:
             raise ValueError("--iterations, --checkpoint-every and --seeds must be >= 1")
         if self.obs_clip is not None and not self.obs_clip > 0:
             raise ValueError(f"--obs-clip {self.obs_clip}: allowed > 0 (or leave it out)")
+        if self.arming_level is not None:
+            if not 0 < self.arming_level < 2:
+                raise ValueError(f"--arming-level {self.arming_level}: allowed 0 < p.u. < 2")
+            if not self.self_mask:
+                raise ValueError("--arming-level: needs --self-mask (it arms the policy's own "
+                                 "mask)")
 
 
 class Problem(Protocol):
@@ -102,15 +112,16 @@ class Problem(Protocol):
     info: dict
 
     def evaluator(self, apply: Callable, carry, mesh, *, self_mask: bool,
-                  task_batch: int | None, compact_after: int | None,
-                  compact_chunks: int) -> Callable:
+                  arming_level: float | None, task_batch: int | None,
+                  compact_after: int | None, compact_chunks: int) -> Callable:
         """evaluate(thetas (P, size), shared, tasks (m, ...), data) -> dict of (P, m, ...)
         episode results ("reward", "policy_carry", optionally "steps"): each θ's episodes
         run the controller `apply(params, obs, carry, inputs)` with params (θ, *shared) and
         `carry` at the start, the P vectors split over `mesh` and batched as the problem
         sees fit (`ars.iteration.make_iteration`; `ParsConfig` says what the batching fields
         ask for); self_mask: the controller first drops the requests the problem's action
-        mask would (`TrainConfig.self_mask`)."""
+        mask would (`TrainConfig.self_mask`), and with arming_level every one until an
+        action bus falls below that level (`TrainConfig.arming_level`)."""
 
     def save(self, folder: Path) -> None:
         """Write what rebuilds the environment into the run folder (process 0, at start)."""
@@ -134,6 +145,7 @@ def make_trainer(problem: Problem, config: TrainConfig, mesh=None) -> Trainer:
     policy, pars, mesh = Policy(spec), config.pars, mesh or default_mesh()
     evaluate = problem.evaluator(normalized_policy(policy, problem.network),
                                  initial_carry(policy), mesh, self_mask=config.self_mask,
+                                 arming_level=config.arming_level,
                                  task_batch=pars.task_batch,
                                  compact_after=pars.compact_after,
                                  compact_chunks=pars.compact_chunks)
@@ -173,7 +185,9 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
     trainer = make_trainer(problem, config, mesh)
     run_info = {**problem.info, "config": dataclasses.asdict(config.pars),
                 "seeds": config.seeds, "iterations": config.iterations,
-                **({"self_mask": True} if config.self_mask else {})}  # policy.json as before
+                **({"self_mask": True} if config.self_mask else {}),  # policy.json as before
+                **({"arming_level": config.arming_level} if config.arming_level is not None
+                   else {})}
     state, log = init_state(trainer.policy, config.pars, config.seeds), []
     if config.resume:
         restored = checkpoint.restore_latest(mgr, state)
@@ -184,7 +198,8 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
         for flag, value, unsaved in (("seeds", config.seeds, None),
                                      ("obs_clip", config.obs_clip, None),
                                      ("relative_inputs", config.relative_inputs, False),
-                                     ("self_mask", config.self_mask, False)):
+                                     ("self_mask", config.self_mask, False),
+                                     ("arming_level", config.arming_level, None)):
             if meta.get(flag, unsaved) != value:  # unsaved: a run from before the flag
                 raise ValueError(f"--resume: the run in {out} has --{flag.replace('_', '-')} "
                                  f"{meta.get(flag)}, not {value}")

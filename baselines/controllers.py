@@ -123,7 +123,8 @@ SAVED_KINDS = {"policy": None, "ppo": "ppo"}  # prefix -> the "kind" its policy.
 ARGUMENT = {"none": False, "uvls": False, "mpc": None}  # takes none / may take one (else: must)
 
 
-def load(spec: str, study, own_mask: bool = True) -> Controller:
+def load(spec: str, study, own_mask: bool = True, arming_level: float | None = None
+         ) -> Controller:
     """The controller `spec` (module docstring) on `study`'s environment; ValueError naming
     the spec if it is none of `SPECS`, or a saved policy that does not fit the study.
 
@@ -132,9 +133,12 @@ def load(spec: str, study, own_mask: bool = True) -> Controller:
     requests with it (`own_mask`, `jaxgrid.episode.masked`: the supervision it was trained
     with travels with it, as a relay's arming logic does), with a warning that says so;
     one trained to mask its own requests (policy.json's "self_mask", `--self-mask`) masks
-    them wherever it runs, under its own mask too, as in training. own_mask=False leaves
-    them unmasked (they then pass otherwise than in training, which the warning says).
-    [choice]; the PNNL study's policies have no mask, so neither changes them."""
+    them wherever it runs, under its own mask too, as in training, with the arming level it
+    was trained with (policy.json's "arming_level", `--arming-level`) or `arming_level` (p.u.)
+    in its place: a setting of the policy's arming, as a relay's is set where it is
+    installed. own_mask=False leaves them unmasked (they then pass otherwise than in
+    training, which the warning says). [choice]; the PNNL study's policies have no mask, so
+    neither changes them."""
     prefix, colon, argument = spec.partition(":")
     takes = ARGUMENT.get(prefix, True)
     if prefix not in LOADERS or (takes is False and colon) or (takes is True and not argument):
@@ -142,6 +146,9 @@ def load(spec: str, study, own_mask: bool = True) -> Controller:
     controller = LOADERS[prefix](spec, argument, study)
     trained, here = controller.info.get("action_mask", "none"), controller.env.config.action_mask
     armed = controller.info.get("self_mask", False)
+    if arming_level is not None and not armed:
+        raise ValueError(f"--arming-level: {spec} does not mask its own requests (trained "
+                         "without --self-mask), so it has no arming to narrow")
     if trained == "none" or (trained == here and not armed):
         return controller
     if trained != here:
@@ -152,8 +159,9 @@ def load(spec: str, study, own_mask: bool = True) -> Controller:
                       stacklevel=2)
     if not own_mask:
         return controller
+    level = controller.info.get("arming_level") if arming_level is None else arming_level
     return dataclasses.replace(controller, apply=masked(controller.apply, trained,
-                                                        controller.env), own_mask=trained)
+                                                        controller.env, level), own_mask=trained)
 
 
 def _saved(spec: str, path: str, kind: str | None) -> str:

@@ -28,7 +28,9 @@ The file (TOML; paths relative to it):
 A row with a `controller` (an `experiments.evaluate` spec; a path after its prefix relative to
 the file) trains nothing: that controller is scored as one seed; a list of specs
 (`controller = ["policy:runs/a/seed0", "policy:runs/b/seed0"]`) is scored as that many seeds,
-e.g. the seeds of a training made elsewhere, or before a change to the simulator. Each row's
+e.g. the seeds of a training made elsewhere, or before a change to the simulator. A row's
+`arming_level = 0.85` (p.u.) scores its saved policies, trained with --self-mask, armed only
+once an action bus falls below that level (`experiments.evaluate --arming-level`). Each row's
 seeds train as one program in a run folder named by the study and the training
 (`experiments.reproduce.runs.Runs`: a finished row is reused, an interrupted one resumes);
 every seed's final policy, no control and UVLS are evaluated on each task set in the row's
@@ -55,20 +57,22 @@ from experiments.common.training import Choices, shaping
 from experiments.reproduce.runs import FULL, Runs, metrics_rows
 
 SPEC_KEYS = {"out", "seeds", "iterations", "task_sets", "rows", "subsets"}
-ROW_KEYS = {"name", "study", "flags", "why", "controller"}
+ROW_KEYS = {"name", "study", "flags", "why", "controller", "arming_level"}
 SUBSET_KEYS = {"of", "points", "why"}
 
 
 @dataclasses.dataclass(frozen=True)
 class Row:
     """One configuration: name, study file (absolute), experiments.train flags, why; or
-    fixed controller specs (paths absolute), one per seed, evaluated instead of a training."""
+    fixed controller specs (paths absolute), one per seed, evaluated instead of a training;
+    arming_level: p.u., the saved policies' arming level when scored, or None (theirs)."""
 
     name: str
     study: str
     flags: tuple[str, ...]
     why: str
     controllers: tuple[str, ...] = ()
+    arming_level: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,8 +134,11 @@ def read_spec(path: str | Path) -> Spec:
             raise ValueError(f"{where}.controller = {controller!r}: a controller spec string "
                              "or a non-empty list of them (one per seed), in a row without "
                              "flags")
+        level = row.get("arming_level")
+        if level is not None and not (isinstance(level, float) and 0 < level < 2):
+            raise ValueError(f"{where}.arming_level = {level!r}: allowed 0 < p.u. < 2 (a float)")
         rows.append(Row(row["name"], str(study), tuple(flags), row.get("why", ""),
-                        tuple(_beside(path, c) for c in listed or ())))
+                        tuple(_beside(path, c) for c in listed or ()), level))
     names = [r.name for r in rows]
     if len(set(names)) < len(names):
         raise ValueError(f"{path}: rows: a name used twice in {names}")
@@ -205,8 +212,8 @@ def run_row(spec: Spec, row: Row, train: bool, studies: dict) -> dict | None:
         none, uvls = (at_points(evaluation(c, task_set), points) for c in ("none", "uvls"))
         record[name] = {
             "uvls": scores(none, uvls, uvls),
-            "seeds": [scores(none, uvls, at_points(evaluation(c, task_set), points))
-                      for c in controllers]}
+            "seeds": [scores(none, uvls, at_points(evaluation(c, task_set, row.arming_level),
+                                                   points)) for c in controllers]}
     return record
 
 

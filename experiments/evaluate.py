@@ -17,7 +17,8 @@ policy:PATH, PPO: ppo:PATH, a folder written by `experiments.train` or
 `experiments.train_ppo`) must observe and act on the study's buses; a published network
 (rlgc:FILE, `baselines.rlgc`) picks its own buses from the study's observation. A saved
 policy trained under an action mask the study lacks, or trained with --self-mask, masks its
-own requests as in training (the result then holds "own_mask"; --no-own-mask: unmasked). Where a
+own requests as in training (the result then holds "own_mask"; --no-own-mask: unmasked), with
+the arming level it was trained with or --arming-level's (the result then holds it). Where a
 published file has a training log beside it, each task of the first operating point that
 the log has gains "log_reward" (null for the others), and the result "log" {"path",
 "iteration"}: `experiments.compare` sets them side by side. The work is
@@ -51,11 +52,15 @@ def main(argv: list[str] | None = None) -> int:
                    help="a saved policy trained under an action mask this study lacks, or "
                         "with --self-mask, asks unmasked (default: it masks its own requests "
                         "as in training)")
+    p.add_argument("--arming-level", type=float,
+                   help="p.u.: a saved policy trained with --self-mask asks to shed nothing "
+                        "until an action bus has fallen below this level after clearing, in "
+                        "place of the level it was trained with (default: that, if any)")
     args = p.parse_args(argv)
     try:
         study = study_from_args(args)
         result = evaluate(study, args.controller, args.tasks, args.plot, args.plot_count,
-                          args.own_mask)
+                          args.own_mask, args.arming_level)
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

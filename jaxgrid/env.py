@@ -43,7 +43,8 @@ from jaxgrid import network
 from jaxgrid.case import VOLTAGE
 from jaxgrid.checks import InputError, Range, check_int, check_listed
 from jaxgrid.grid import GridModel, GridState
-from jaxgrid.recovery import envelope, mask_allows, normal_operation, supervision_allows
+from jaxgrid.recovery import (MASK_HOLD, envelope, mask_allows, normal_operation,
+                             supervision_allows)
 from jaxgrid.simulate import Bounds, Health, Task, advance, bus_voltage_sets, initial_health
 from jaxgrid.steppers import Solver, clip_closed, shed
 
@@ -251,6 +252,9 @@ class EnvState:
         level before the fault).
       action_vm: (n_action,) p.u. voltage at the action buses at the newest observation (what
         the normal-operation test of the next request reads).
+      lowest_action_vm: () p.u. the lowest voltage at an action bus observed at least
+        `MASK_HOLD` after clearing (inf until then): what a policy's arming level reads
+        (`jaxgrid.episode.masked`).
       done: () bool.
     """
 
@@ -261,6 +265,7 @@ class EnvState:
     history: jnp.ndarray
     recovery_check: jnp.ndarray
     action_vm: jnp.ndarray
+    lowest_action_vm: jnp.ndarray
     done: jnp.ndarray
 
 
@@ -382,7 +387,8 @@ class LoadSheddingEnv:
         check = (vm >= params.recovery_level) & self.recovery_mask
         state = EnvState(grid=x, health=initial_health(grid), task=task,
                          step=jnp.zeros((), jnp.int32), history=history,
-                         recovery_check=check, action_vm=action_vm, done=jnp.zeros((), bool))
+                         recovery_check=check, action_vm=action_vm,
+                         lowest_action_vm=jnp.full((), jnp.inf, real), done=jnp.zeros((), bool))
         return history.reshape(-1), state
 
     def _advance(self, grid: GridModel, x: GridState, health: Health, t, task: Task, fault,
@@ -440,6 +446,9 @@ class LoadSheddingEnv:
                                                                     task, fault, state.done)
         t_next = t + cfg.agent_dt
         after = t_next - task.fault_end
+        lowest = jnp.where(after >= MASK_HOLD, jnp.minimum(state.lowest_action_vm,
+                                                           jnp.min(action_vm)),
+                           state.lowest_action_vm)
         failed = recovery_failed(vm, state.recovery_check, after, params) | health.diverged
         shed_pu = shed_power(amount, grid.load_p0[self.action_slots])
         shaped = (params.c_voltage * envelope_deviation(vm, after) - params.c_shed * shed_pu
@@ -450,7 +459,7 @@ class LoadSheddingEnv:
         history = jnp.concatenate([state.history, observed])[-cfg.history:]
         new = EnvState(grid=x, health=health, task=task, step=state.step + 1,
                        history=history, recovery_check=state.recovery_check,
-                       action_vm=action_vm, done=done)
+                       action_vm=action_vm, lowest_action_vm=lowest, done=done)
         info = {"terminated": failed, "truncated": truncated & ~failed,
                 "shed_pu": shed_pu, "shaped_reward": shaped,
                 "diverged": health.diverged}

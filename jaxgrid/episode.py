@@ -103,18 +103,25 @@ def idle_controller(n_action: int) -> Callable:
     return lambda params, obs, carry, inputs: (jnp.zeros(n_action), carry)
 
 
-def masked(apply, mask: str, env: LoadSheddingEnv) -> Callable:
+def masked(apply, mask: str, env: LoadSheddingEnv, arming_level: float | None = None
+           ) -> Callable:
     """The controller `apply` (this module's signature) with its actions at the action buses
     that `mask` does not let shed (`jaxgrid.env.mask_passes` on the episode's state: the bus
     voltages at the request and the time since clearing) set to 0 (no request): a policy
     that masks its own requests, as a relay's arming logic does (`jaxgrid.problem.
-    GridProblem.evaluator`'s self_mask, `baselines.controllers.load`)."""
+    GridProblem.evaluator`'s self_mask, `baselines.controllers.load`). With `arming_level`
+    (p.u.) it requests nothing at all until an action bus has been observed below that level
+    at least the mask's hold after clearing (`EnvState.lowest_action_vm`), and stays armed
+    for the episode: a far fault that only dips the voltages leaves it alone."""
     agent_dt = env.config.agent_dt
 
     def apply_masked(params, obs, carry, inputs: ControlInputs):
         action, carry = apply(params, obs, carry, inputs)
-        t = inputs.state.step.astype(inputs.grid.network.real_dtype) * agent_dt
-        passes = mask_passes(mask, inputs.state, t, inputs.params)
+        state = inputs.state
+        t = state.step.astype(inputs.grid.network.real_dtype) * agent_dt
+        passes = mask_passes(mask, state, t, inputs.params)
+        if arming_level is not None:
+            passes &= state.lowest_action_vm < arming_level
         return jnp.where(passes, action, jnp.zeros_like(action)), carry
 
     return apply_masked

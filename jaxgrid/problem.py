@@ -204,19 +204,21 @@ class GridProblem:
     info: dict
     quiet_charge: float = 0.0
 
-    def evaluator(self, apply, carry, mesh, self_mask: bool = False, **batching) -> Callable:
+    def evaluator(self, apply, carry, mesh, self_mask: bool = False,
+                  arming_level: float | None = None, **batching) -> Callable:
         """The problem's `evaluate` of a population of `apply` (`jaxgrid.population.evaluator`
         of `PointEpisode`; batching: task_batch, compact_after, compact_chunks), each
         episode's reward less quiet_charge·(its load shed, p.u.) on the quiet tasks.
         self_mask: `apply` masks its own requests with the study's action mask
         (`jaxgrid.episode.masked`), so a request the mask would drop is never made (nor
-        charged c_normal or c_prefault); ValueError on a study without one."""
+        charged c_normal or c_prefault); ValueError on a study without one. arming_level
+        (p.u., with self_mask): `apply` asks nothing until an action bus falls below it."""
         if self_mask:
             mask = self.env.config.action_mask
             if mask == "none":
                 raise ValueError(f"--self-mask: study {self.study.name!r} has no action mask "
                                  "([env] action_mask) for the policy to mask its requests with")
-            apply = episode.masked(apply, mask, self.env)
+            apply = episode.masked(apply, mask, self.env, arming_level)
         evaluate = population.evaluator(self.episode, apply, carry, mesh, **batching)
         if not self.quiet_charge:
             return evaluate

@@ -167,6 +167,11 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
     _, _, _, _, info = steps["undervoltage"](held, request, EnvParams(c_normal=3.0), grid)
     assert float(info["shed_pu"]) == pytest.approx(shed_both, rel=1e-6)  # below 0.95: applied
     assert np.asarray(new.action_vm).shape == (3,)
+    # the lowest action-bus voltage from the 0.15-s hold on (what an arming level reads):
+    # none at the reset nor 0.12 s after clearing, the newest observation's 0.32 s after
+    assert float(start.lowest_action_vm) == float(new.lowest_action_vm) == np.inf
+    _, later, _, _, _ = steps["none"](state, jnp.zeros(3), EnvParams(), grid)
+    assert float(later.lowest_action_vm) == float(jnp.min(later.action_vm)) < 1.0
     # a policy trained under a mask, run where the environment has none, masks its own
     # requests (`jaxgrid.episode.masked`): the environment without a mask then sheds
     # what the masked one does, at both states
@@ -186,6 +191,16 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
         action, _ = own(None, None, None, ControlInputs(state, grid, EnvParams(), state.step))
         _, _, reward, _, _ = steps[mask](state, action, EnvParams(c_normal=3.0), grid)
         assert float(reward) == pytest.approx(out[mask, 0.0][0], rel=1e-6), mask
+    # with an arming level of 0.85 p.u. (--arming-level) it asks nothing until an action bus
+    # has been observed below 0.85 p.u. from the hold on: the lowest, none before the hold
+    # (inf), 0.86 p.u. or 0.84 p.u.
+    armed = masked(lambda params, obs, carry, inputs: (request, carry), "hadrec",
+                   study.env(), 0.85)
+    for lowest, expected in ((np.inf, 0.0), (0.86, 0.0), (0.84, shed_507)):
+        at = state.replace(lowest_action_vm=jnp.asarray(lowest))
+        action, _ = armed(None, None, None, ControlInputs(at, grid, EnvParams(), at.step))
+        _, _, _, _, info = steps["none"](at, action, EnvParams(), grid)
+        assert float(info["shed_pu"]) == pytest.approx(expected, rel=1e-6), lowest
 
 
 def test_observations_every_obs_interval_end_with_the_agent_step_s_own(study, grid, tasks):

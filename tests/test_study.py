@@ -296,10 +296,12 @@ def test_policy_of_another_layout_is_refused_by_name(tmp_path, ieee39):
         evaluate(ieee39, f"policy:{folder}", "test")
 
 
-def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_path, ieee39):
+def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_path, ieee39,
+                                                                         monkeypatch):
     """A saved policy records the action mask it was trained under; loaded on a study without
     it, it masks its own requests and says so (own_mask=False: unmasked, and the warning says
     its requests pass otherwise than in training); the latency benchmark times it."""
+    from baselines import controllers
     from baselines.controllers import load
 
     folder = tmp_path / "policy"
@@ -333,7 +335,18 @@ def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_pat
         (folder / "policy.json").write_text(json.dumps({**info, "self_mask": True}))
         assert load(f"policy:{folder}", UnderItsMask()).own_mask == "hadrec", (
             "trained with --self-mask: it masks its own requests under its mask too")
+        (folder / "policy.json").write_text(json.dumps({**info, "self_mask": True,
+                                                        "arming_level": 0.85}))
+        monkeypatch.setattr(controllers, "masked", lambda apply, mask, env, level: (mask, level))
+        assert load(f"policy:{folder}", UnderItsMask()).apply == ("hadrec", 0.85), (
+            "and with the arming level it was trained with")
+        assert load(f"policy:{folder}", UnderItsMask(), arming_level=0.8).apply == (
+            "hadrec", 0.8), "or the one it is given where it runs"
+        monkeypatch.undo()
         (folder / "policy.json").write_text(json.dumps(info))
+        with pytest.raises(ValueError, match=r"--arming-level: policy:\S+ does not mask its "
+                                             r"own requests \(trained without --self-mask\)"):
+            load(f"policy:{folder}", UnderItsMask(), arming_level=0.8)
     # the latency benchmark (the reproduction's tab3) times it deciding from a faulted state
     from experiments.bench.controller_latency import bench_study
 

@@ -138,6 +138,11 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
     assert run(TINY + ["--self-mask", "--out", str(tmp_path)], "train_39bus") == 2
     assert ("--self-mask: study 'ieee39_fidvr' has no action mask ([env] action_mask)"
             in capsys.readouterr().err)
+    assert run(TINY + ["--arming-level", "0.85", "--out", str(tmp_path)], "train_39bus") == 2
+    assert "--arming-level: needs --self-mask" in capsys.readouterr().err
+    assert run(TINY + ["--self-mask", "--arming-level", "2", "--out", str(tmp_path)],
+               "train_39bus") == 2
+    assert "--arming-level 2.0: allowed 0 < p.u. < 2" in capsys.readouterr().err
     assert run(TINY + ["--obs-clip", "0", "--out", str(tmp_path)], "train_39bus") == 2
     assert "--obs-clip 0.0: allowed > 0" in capsys.readouterr().err
     before = (straight / "metrics.jsonl").read_text()

@@ -30,11 +30,13 @@ def task_specs(study: Study, tasks: str):
 
 
 def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
-             plot_count: int = 3, own_mask: bool = True) -> dict:
+             plot_count: int = 3, own_mask: bool = True,
+             arming_level: float | None = None) -> dict:
     """The results dict of the module docstring (and figures in plot_dir). `tasks`: a task
     set name, a PNNL task JSON, or a list of TaskSpec. own_mask: a saved policy trained under
-    an action mask the study lacks masks its own requests (`baselines.controllers.load`)."""
-    controller = load(control, study, own_mask)
+    an action mask the study lacks masks its own requests; arming_level (p.u.): a saved
+    policy's own, in place of what it was trained with (`baselines.controllers.load`)."""
+    controller = load(control, study, own_mask, arming_level)
     env = controller.env
     log = training_log(control.removeprefix("rlgc:")) if control.startswith("rlgc:") else None
     for k, point in enumerate(study.points):
@@ -56,6 +58,7 @@ def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
     rewards = [r["reward"] for r in rows]
     result = {"study": study.name, "controller": control,
               **({"own_mask": controller.own_mask} if controller.own_mask else {}),
+              **({"arming_level": arming_level} if arming_level is not None else {}),
               "points": [p.label for p in study.points], "tasks": rows,
               "summary": {"n_tasks": len(rows),
                           "n_recovered": sum(r["recovered"] for r in rows),

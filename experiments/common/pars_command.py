@@ -44,6 +44,12 @@ def parser(command: str) -> argparse.ArgumentParser:
                         "mask would drop it (and is never charged for it); needs a study with "
                         "[env] action_mask (default: its requests go to the environment as "
                         "they are, the paper's)")
+    p.add_argument("--arming-level", type=float,
+                   help="with --self-mask, the policy asks to shed nothing until one of its "
+                        "action buses has been observed below this level (p.u.) from 0.15 s "
+                        "after clearing, then is armed for the episode, so a far fault that "
+                        "only dips the voltages is left alone, as a relay's pickup does "
+                        "(default: none, armed throughout)")
     p.add_argument("--obs-std-floor", type=float,
                    help="the observation normaliser's smallest standard deviation of a "
                         "varying input, in its units (p.u. for voltages; default: none, as "

@@ -50,6 +50,8 @@ class Choices:
       relative_inputs: inputs as their change since the episode's start (not the paper's).
       self_mask: the policy masks its own requests with the study's action mask (not the
         paper's; `ars.train.TrainConfig.self_mask`).
+      arming_level: p.u., with self_mask: the policy armed only once an action bus falls
+        below it, or None (`ars.train.TrainConfig.arming_level`).
       obs_std_floor: the normaliser's smallest standard deviation, or None (none).
       history: observations stacked (None: the study's for the policy kind).
       directions: N.  top: b (None: N/2).  step_size: α.  noise: ν.  decay: ε.
@@ -68,6 +70,7 @@ class Choices:
     obs_clip: float | None = TrainConfig.obs_clip
     relative_inputs: bool = TrainConfig.relative_inputs
     self_mask: bool = TrainConfig.self_mask
+    arming_level: float | None = TrainConfig.arming_level
     obs_std_floor: float | None = ParsConfig.obs_std_floor
     history: int | None = None
     directions: int | None = None
@@ -109,6 +112,7 @@ def train_config(study, choices: Choices = Choices()) -> TrainConfig:
         () if choices.policy == "linear" else preset["hidden"])
     return TrainConfig(policy=choices.policy, hidden=tuple(hidden), obs_clip=choices.obs_clip,
                        relative_inputs=choices.relative_inputs, self_mask=choices.self_mask,
+                       arming_level=choices.arming_level,
                        pars=pars, iterations=choices.iterations, seeds=choices.seeds,
                        checkpoint_every=choices.checkpoint_every, out=choices.out,
                        resume=choices.resume)

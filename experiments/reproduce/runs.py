@@ -170,8 +170,8 @@ class Runs:
             inputs["pars"].pop("obs_std_floor")
         if inputs["obs_clip"] is None:  # named as before it
             inputs.pop("obs_clip")
-        for flag in ("relative_inputs", "self_mask"):
-            if not inputs[flag]:  # named as before it
+        for flag in ("relative_inputs", "self_mask", "arming_level"):
+            if inputs[flag] is False or inputs[flag] is None:  # named as before it
                 inputs.pop(flag)
         inputs["pars"]["task_batch"] = self.preset["task_batch"]  # the same on a GPU
         named = {"config": inputs, "history": choices.history,
@@ -298,15 +298,18 @@ class Runs:
         return f"ppo:{folders[best] / 'policy'}"
 
     # --- evaluations -----------------------------------------------------------------------
-    def evaluation(self, control: str, tasks: str = "test") -> dict:
-        """`experiments.evaluate` of `control` on a task set, cached."""
+    def evaluation(self, control: str, tasks: str = "test",
+                   arming_level: float | None = None) -> dict:
+        """`experiments.evaluate` of `control` on a task set (a saved self-masked policy with
+        `arming_level`, p.u., if given), cached."""
         from experiments.common.evaluation import evaluate
 
-        path = self.folder("eval", {**self._controller_inputs(control), "tasks": tasks})
+        level = {} if arming_level is None else {"arming_level": arming_level}  # named as before
+        path = self.folder("eval", {**self._controller_inputs(control), "tasks": tasks, **level})
         path = path / "result.json"
         if path.is_file():
             return json.loads(path.read_text())
-        result = evaluate(self.study, self._spec(control), tasks)
+        result = evaluate(self.study, self._spec(control), tasks, arming_level=arming_level)
         path.write_text(json.dumps(result, indent=1))
         return result
 
