@@ -29,7 +29,7 @@ A row with a `controller` (an `experiments.evaluate` spec; a path after its pref
 the file) trains nothing: that controller is scored as one seed; a list of specs
 (`controller = ["policy:runs/a/seed0", "policy:runs/b/seed0"]`) is scored as that many seeds,
 e.g. the seeds of a training made elsewhere, or before a change to the simulator. A row's
-`arming_level = 0.85` (p.u.) scores its saved policies, trained with --self-mask, armed only
+`arming_level = 0.8` (p.u.) scores its saved policies, trained with --self-mask, armed only
 once an action bus falls below that level (`experiments.evaluate --arming-level`). Each row's
 seeds train as one program in a run folder named by the study and the training
 (`experiments.reproduce.runs.Runs`: a finished row is reused, an interrupted one resumes);
