@@ -47,7 +47,8 @@ class Controller:
         for the others (the study's).
       info: a saved policy's run information (policy.json), {} for the others.
       own_mask: the action mask a saved policy applies to its own requests (`load`), None
-        when it applies none.
+        when it applies none.  arming_level: p.u., the level below which an action bus arms
+        that mask (`load`), None for none.
     """
 
     spec: str
@@ -59,6 +60,7 @@ class Controller:
     history: int | None = None
     info: dict = dataclasses.field(default_factory=dict)
     own_mask: str | None = None
+    arming_level: float | None = None
 
 
 def no_control(env: LoadSheddingEnv):
@@ -161,7 +163,8 @@ def load(spec: str, study, own_mask: bool = True, arming_level: float | None = N
         return controller
     level = controller.info.get("arming_level") if arming_level is None else arming_level
     return dataclasses.replace(controller, apply=masked(controller.apply, trained,
-                                                        controller.env, level), own_mask=trained)
+                                                        controller.env, level),
+                               own_mask=trained, arming_level=level)
 
 
 def _saved(spec: str, path: str, kind: str | None) -> str:

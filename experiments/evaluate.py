@@ -18,7 +18,8 @@ policy:PATH, PPO: ppo:PATH, a folder written by `experiments.train` or
 (rlgc:FILE, `baselines.rlgc`) picks its own buses from the study's observation. A saved
 policy trained under an action mask the study lacks, or trained with --self-mask, masks its
 own requests as in training (the result then holds "own_mask"; --no-own-mask: unmasked), with
-the arming level it was trained with or --arming-level's (the result then holds it). Where a
+the arming level its policy.json gives or --arming-level's (the result then holds
+"arming_level"). Where a
 published file has a training log beside it, each task of the first operating point that
 the log has gains "log_reward" (null for the others), and the result "log" {"path",
 "iteration"}: `experiments.compare` sets them side by side. The work is

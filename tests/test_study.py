@@ -338,7 +338,8 @@ def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_pat
         (folder / "policy.json").write_text(json.dumps({**info, "self_mask": True,
                                                         "arming_level": 0.85}))
         monkeypatch.setattr(controllers, "masked", lambda apply, mask, env, level: (mask, level))
-        assert load(f"policy:{folder}", UnderItsMask()).apply == ("hadrec", 0.85), (
+        armed = load(f"policy:{folder}", UnderItsMask())
+        assert (armed.apply, armed.arming_level) == (("hadrec", 0.85), 0.85), (
             "and with the arming level it was trained with")
         assert load(f"policy:{folder}", UnderItsMask(), arming_level=0.8).apply == (
             "hadrec", 0.8), "or the one it is given where it runs"

@@ -151,6 +151,19 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
     assert (straight / "metrics.jsonl").read_text() == before, "a fresh run loses nothing"
 
 
+def test_a_self_masked_armed_training_saves_its_arming(tmp_path, capsys):
+    """--self-mask --arming-level on a study with an action mask trains, and the policy and
+    checkpoint keep the level: a resume with another is refused."""
+    study = tmp_path / "masked.toml"
+    study.write_text('[grid]\nbuiltin = "ieee39_fidvr"\n[env]\naction_mask = "hadrec"\n')
+    armed = TINY + ["--study", str(study), "--self-mask", "--out", str(tmp_path / "run")]
+    assert run(armed + ["--arming-level", "0.8", "--iterations", "1"], "train") == 0
+    info = json.loads((tmp_path / "run" / "policy" / "policy.json").read_text())
+    assert (info["action_mask"], info["self_mask"], info["arming_level"]) == ("hadrec", True, 0.8)
+    assert run(armed + ["--arming-level", "0.7", "--iterations", "2", "--resume"], "train") == 2
+    assert "has --arming-level 0.8, not 0.7" in capsys.readouterr().err
+
+
 def test_the_300_bus_gridpack_files_train_from_their_own_files(shared_cases, tmp_path):
     """The PNNL GridPACK pair with its LSTM multi-operating-point training file (zone-1
     observation scope, 34 action buses, 8 fault buses), a few stratified iterations, then a

@@ -58,7 +58,8 @@ def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
     rewards = [r["reward"] for r in rows]
     result = {"study": study.name, "controller": control,
               **({"own_mask": controller.own_mask} if controller.own_mask else {}),
-              **({"arming_level": arming_level} if arming_level is not None else {}),
+              **({"arming_level": controller.arming_level}
+                 if controller.arming_level is not None else {}),
               "points": [p.label for p in study.points], "tasks": rows,
               "summary": {"n_tasks": len(rows),
                           "n_recovered": sum(r["recovered"] for r in rows),
