@@ -78,8 +78,6 @@ class TrainConfig:
         if self.obs_clip is not None and not self.obs_clip > 0:
             raise ValueError(f"--obs-clip {self.obs_clip}: allowed > 0 (or leave it out)")
         if self.arming_level is not None:
-            if not 0 < self.arming_level < 2:
-                raise ValueError(f"--arming-level {self.arming_level}: allowed 0 < p.u. < 2")
             if not self.self_mask:
                 raise ValueError("--arming-level: needs --self-mask (it arms the policy's own "
                                  "mask)")

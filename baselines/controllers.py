@@ -135,12 +135,14 @@ def load(spec: str, study, own_mask: bool = True, arming_level: float | None = N
     requests with it (`own_mask`, `jaxgrid.episode.masked`: the supervision it was trained
     with travels with it, as a relay's arming logic does), with a warning that says so;
     one trained to mask its own requests (policy.json's "self_mask", `--self-mask`) masks
-    them wherever it runs, under its own mask too, as in training, with the arming level it
-    was trained with (policy.json's "arming_level", `--arming-level`) or `arming_level` (p.u.)
-    in its place: a setting of the policy's arming, as a relay's is set where it is
-    installed. own_mask=False leaves them unmasked (they then pass otherwise than in
-    training, which the warning says). [choice]; the PNNL study's policies have no mask, so
-    neither changes them."""
+    them wherever it runs, under its own mask too, as in training. A policy trained under a
+    mask is armed (`jaxgrid.episode.masked`) at policy.json's "arming_level" (trained with
+    `--arming-level`, or set where it is installed) or at `arming_level` (p.u.) in its place,
+    wherever it runs: a setting of the policy's supervision, as a relay's is set where it is
+    installed (ValueError for a policy trained without a mask). own_mask=False leaves its
+    requests unmasked and unarmed (they then pass otherwise than in training, which the
+    warning says). [choice]; the PNNL study's policies have no mask, so neither changes
+    them."""
     prefix, colon, argument = spec.partition(":")
     takes = ARGUMENT.get(prefix, True)
     if prefix not in LOADERS or (takes is False and colon) or (takes is True and not argument):
@@ -148,10 +150,11 @@ def load(spec: str, study, own_mask: bool = True, arming_level: float | None = N
     controller = LOADERS[prefix](spec, argument, study)
     trained, here = controller.info.get("action_mask", "none"), controller.env.config.action_mask
     armed = controller.info.get("self_mask", False)
-    if arming_level is not None and not armed:
-        raise ValueError(f"--arming-level: {spec} does not mask its own requests (trained "
-                         "without --self-mask), so it has no arming to narrow")
-    if trained == "none" or (trained == here and not armed):
+    level = controller.info.get("arming_level") if arming_level is None else arming_level
+    if arming_level is not None and trained == "none":
+        raise ValueError(f"--arming-level: {spec} was trained without an action mask, so it "
+                         "has no mask to arm")
+    if trained == "none" or (trained == here and not armed and level is None):
         return controller
     if trained != here:
         warnings.warn(f"{spec} was trained with action_mask = {trained!r} (study "
@@ -161,7 +164,6 @@ def load(spec: str, study, own_mask: bool = True, arming_level: float | None = N
                       stacklevel=2)
     if not own_mask:
         return controller
-    level = controller.info.get("arming_level") if arming_level is None else arming_level
     return dataclasses.replace(controller, apply=masked(controller.apply, trained,
                                                         controller.env, level),
                                own_mask=trained, arming_level=level)

@@ -55,6 +55,7 @@ from experiments.common.pars_command import parser as train_parser
 from experiments.common.scores import scores, targets_met
 from experiments.common.training import Choices, shaping
 from experiments.reproduce.runs import FULL, Runs, metrics_rows
+from jaxgrid.episode import check_arming_level
 
 SPEC_KEYS = {"out", "seeds", "iterations", "task_sets", "rows", "subsets"}
 ROW_KEYS = {"name", "study", "flags", "why", "controller", "arming_level"}
@@ -135,8 +136,7 @@ def read_spec(path: str | Path) -> Spec:
                              "or a non-empty list of them (one per seed), in a row without "
                              "flags")
         level = row.get("arming_level")
-        if level is not None and not (isinstance(level, float) and 0 < level < 2):
-            raise ValueError(f"{where}.arming_level = {level!r}: allowed 0 < p.u. < 2 (a float)")
+        check_arming_level(level, f"{where}.arming_level")
         rows.append(Row(row["name"], str(study), tuple(flags), row.get("why", ""),
                         tuple(_beside(path, c) for c in listed or ()), level))
     names = [r.name for r in rows]

@@ -17,9 +17,9 @@ policy:PATH, PPO: ppo:PATH, a folder written by `experiments.train` or
 `experiments.train_ppo`) must observe and act on the study's buses; a published network
 (rlgc:FILE, `baselines.rlgc`) picks its own buses from the study's observation. A saved
 policy trained under an action mask the study lacks, or trained with --self-mask, masks its
-own requests as in training (the result then holds "own_mask"; --no-own-mask: unmasked), with
-the arming level its policy.json gives or --arming-level's (the result then holds
-"arming_level"). Where a
+own requests as in training (the result then holds "own_mask"; --no-own-mask: unmasked); one
+trained under a mask is armed at the level its policy.json gives or at --arming-level's (the
+result then holds "arming_level"). Where a
 published file has a training log beside it, each task of the first operating point that
 the log has gains "log_reward" (null for the others), and the result "log" {"path",
 "iteration"}: `experiments.compare` sets them side by side. The work is
@@ -54,9 +54,9 @@ def main(argv: list[str] | None = None) -> int:
                         "with --self-mask, asks unmasked (default: it masks its own requests "
                         "as in training)")
     p.add_argument("--arming-level", type=float,
-                   help="p.u.: a saved policy trained with --self-mask asks to shed nothing "
-                        "until an action bus has fallen below this level after clearing, in "
-                        "place of the level it was trained with (default: that, if any)")
+                   help="p.u.: a saved policy trained under an action mask asks to shed "
+                        "nothing until an action bus has fallen below this level after "
+                        "clearing, in place of its policy.json's (default: that, if any)")
     args = p.parse_args(argv)
     try:
         study = study_from_args(args)

@@ -103,6 +103,18 @@ def idle_controller(n_action: int) -> Callable:
     return lambda params, obs, carry, inputs: (jnp.zeros(n_action), carry)
 
 
+ARMING_LEVELS = (0.0, 2.0)  # p.u., open bounds of an arming level
+
+
+def check_arming_level(level, name: str = "--arming-level") -> None:
+    """ValueError naming `name` unless `level` is None or a number in the open range
+    ARMING_LEVELS (p.u.)."""
+    low, high = ARMING_LEVELS
+    if level is not None and not (isinstance(level, (int, float)) and not isinstance(level, bool)
+                                  and low < level < high):
+        raise ValueError(f"{name} = {level!r}: allowed {low:g} < p.u. < {high:g}")
+
+
 def masked(apply, mask: str, env: LoadSheddingEnv, arming_level: float | None = None
            ) -> Callable:
     """The controller `apply` (this module's signature) with its actions at the action buses
@@ -112,7 +124,9 @@ def masked(apply, mask: str, env: LoadSheddingEnv, arming_level: float | None = 
     GridProblem.evaluator`'s self_mask, `baselines.controllers.load`). With `arming_level`
     (p.u.) it requests nothing at all until an action bus has been observed below that level
     at least the mask's hold after clearing (`EnvState.lowest_action_vm`), and stays armed
-    for the episode: a far fault that only dips the voltages leaves it alone."""
+    for the episode: a far fault that only dips the voltages leaves it alone (ValueError
+    outside `ARMING_LEVELS`)."""
+    check_arming_level(arming_level)
     agent_dt = env.config.agent_dt
 
     def apply_masked(params, obs, carry, inputs: ControlInputs):

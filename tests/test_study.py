@@ -344,10 +344,18 @@ def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_pat
         assert load(f"policy:{folder}", UnderItsMask(), arming_level=0.8).apply == (
             "hadrec", 0.8), "or the one it is given where it runs"
         monkeypatch.undo()
+        with pytest.raises(ValueError, match=r"--arming-level = 0: allowed 0 < p.u. < 2"):
+            load(f"policy:{folder}", UnderItsMask(), arming_level=0)
         (folder / "policy.json").write_text(json.dumps(info))
-        with pytest.raises(ValueError, match=r"--arming-level: policy:\S+ does not mask its "
-                                             r"own requests \(trained without --self-mask\)"):
+        monkeypatch.setattr(controllers, "masked", lambda apply, mask, env, level: (mask, level))
+        assert load(f"policy:{folder}", UnderItsMask(), arming_level=0.8).apply == (
+            "hadrec", 0.8), "trained under the mask the study applies: armed all the same"
+        monkeypatch.undo()
+        (folder / "policy.json").write_text(json.dumps({**info, "action_mask": "none"}))
+        with pytest.raises(ValueError, match=r"--arming-level: policy:\S+ was trained without "
+                                             r"an action mask, so it has no mask to arm"):
             load(f"policy:{folder}", UnderItsMask(), arming_level=0.8)
+        (folder / "policy.json").write_text(json.dumps(info))
     # the latency benchmark (the reproduction's tab3) times it deciding from a faulted state
     from experiments.bench.controller_latency import bench_study
 

@@ -140,9 +140,6 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
             in capsys.readouterr().err)
     assert run(TINY + ["--arming-level", "0.85", "--out", str(tmp_path)], "train_39bus") == 2
     assert "--arming-level: needs --self-mask" in capsys.readouterr().err
-    assert run(TINY + ["--self-mask", "--arming-level", "2", "--out", str(tmp_path)],
-               "train_39bus") == 2
-    assert "--arming-level 2.0: allowed 0 < p.u. < 2" in capsys.readouterr().err
     assert run(TINY + ["--obs-clip", "0", "--out", str(tmp_path)], "train_39bus") == 2
     assert "--obs-clip 0.0: allowed > 0" in capsys.readouterr().err
     before = (straight / "metrics.jsonl").read_text()
@@ -152,11 +149,14 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
 
 
 def test_a_self_masked_armed_training_saves_its_arming(tmp_path, capsys):
-    """--self-mask --arming-level on a study with an action mask trains, and the policy and
-    checkpoint keep the level: a resume with another is refused."""
+    """--self-mask --arming-level on a study with an action mask trains (a level outside
+    0-2 p.u. is refused first), and the policy and checkpoint keep the level: a resume with
+    another is refused."""
     study = tmp_path / "masked.toml"
     study.write_text('[grid]\nbuiltin = "ieee39_fidvr"\n[env]\naction_mask = "hadrec"\n')
     armed = TINY + ["--study", str(study), "--self-mask", "--out", str(tmp_path / "run")]
+    assert run(armed + ["--arming-level", "2"], "train") == 2
+    assert "--arming-level = 2.0: allowed 0 < p.u. < 2" in capsys.readouterr().err
     assert run(armed + ["--arming-level", "0.8", "--iterations", "1"], "train") == 0
     info = json.loads((tmp_path / "run" / "policy" / "policy.json").read_text())
     assert (info["action_mask"], info["self_mask"], info["arming_level"]) == ("hadrec", True, 0.8)
