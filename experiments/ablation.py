@@ -36,8 +36,8 @@ seeds train as one program in a run folder named by the study and the training
 every seed's final policy, no control and UVLS are evaluated on each task set in the row's
 own study (its environment binds every controller alike; evaluations are cached), and scored
 per kind of task (`experiments.common.scores`). `--no-train` tabulates the rows already
-trained. Writes OUT/ablation.json (every seed's record) and OUT/ABLATION.md (one table per
-task set: per row the mean over seeds and the range).
+trained. Writes OUT/ablation.json (every seed's record, for the rows the file names) and
+OUT/ABLATION.md (one table per task set: per row the mean over seeds and the range).
 """
 from __future__ import annotations
 
@@ -274,6 +274,17 @@ def table(spec: Spec, results: dict) -> str:
     return "\n".join(lines)
 
 
+def rows_of_spec(spec: Spec, results: dict, results_path: Path) -> dict:
+    """`results` (ablation.json's records by row name) without the records of rows no longer
+    in the file (renamed or removed), saying which it drops: ablation.json mirrors the file's
+    rows, as ABLATION.md does. A dropped row's runs and evaluations stay on disk."""
+    stale = sorted(set(results) - {row.name for row in spec.rows})
+    if stale:
+        print(f"{results_path}: dropping the records of rows no longer in {spec.path}: "
+              f"{', '.join(stale)}")
+    return {name: record for name, record in results.items() if name not in stale}
+
+
 def _cell(values: list[float], fmt: str) -> str:
     low, high = min(values), max(values)
     if len(values) == 1:
@@ -297,6 +308,7 @@ def main(argv=None) -> int:
         spec.out.mkdir(parents=True, exist_ok=True)
         results_path = spec.out / "ablation.json"
         results = json.loads(results_path.read_text()) if results_path.is_file() else {}
+        results = rows_of_spec(spec, results, results_path)
         studies: dict = {}
         for row in spec.rows:
             if args.only and row.name not in args.only:

@@ -97,8 +97,10 @@ def test_scores_per_kind_of_task_by_hand():
 def test_ablation_file_rows_and_table(tmp_path):
     """An ablation file's rows become training choices (the file's seeds and iterations, the
     row's flags after them); bad entries name the file and key; the table shows each row's
-    mean and range over seeds and how many seeds meet the targets."""
-    from experiments.ablation import Subset, at_points, choices, read_spec, table
+    mean and range over seeds and how many seeds meet the targets; ablation.json drops the
+    records of rows no longer in the file."""
+    from experiments.ablation import (Subset, at_points, choices, read_spec, rows_of_spec,
+                                      table)
 
     study = tmp_path / "study.toml"
     study.write_text('[grid]\nbuiltin = "ieee39_fidvr"\n')
@@ -146,6 +148,8 @@ def test_ablation_file_rows_and_table(tmp_path):
         at_points(at_two, (5,))
     assert "| paper | 66.7 [33.3, 100.0] | 2.0 [2.0, 2.0] (1) |" in text
     assert "| 1/2 |" in text and "| shaped | not trained |" in text
+    renamed = {"paper": {"folder": None}, "paper, seeds 0-1": {"folder": None}}
+    assert list(rows_of_spec(spec, renamed, tmp_path / "ablation.json")) == ["paper"]
     for body, message in (('out = "o"\nseeds = 0\niterations = 1\ntask_sets = ["t"]\n'
                            'rows = [{name = "a", study = "study.toml"}]\n', r"must be >= 1"),
                           ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
