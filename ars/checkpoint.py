@@ -3,7 +3,8 @@
 A checkpoint holds the TrainState (θ, normaliser, PRNG key, iteration, α, ν) and a JSON
 part (config, metrics so far). A saved policy is a folder of `policy.json` ("spec": the
 architecture, and whatever the trainer adds; other learners add "kind") + `policy.npz` (the
-arrays: θ, observation mean and std for PARS), loadable without orbax.
+arrays: θ, observation mean, std and count for PARS), loadable without orbax. A training
+can start from a saved policy (`warm_start`).
 """
 from __future__ import annotations
 
@@ -50,13 +51,15 @@ def restore_latest(mgr: ocp.CheckpointManager, template: TrainState):
 
 
 def save_policy(directory: str | Path, spec: PolicySpec, state: TrainState, extra: dict) -> None:
-    """Write policy.json (spec + extra) and policy.npz (theta, mean, std) into `directory`."""
+    """Write policy.json (spec + extra) and policy.npz (theta, mean, std, and count: the
+    observations the statistics hold) into `directory`."""
     folder = Path(directory)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "policy.json").write_text(json.dumps(
         {"spec": dataclasses.asdict(spec), **extra}, indent=1))
     np.savez(folder / "policy.npz", theta=np.asarray(state.theta),
-             mean=np.asarray(state.stats.mean), std=np.asarray(state.stats.std))
+             mean=np.asarray(state.stats.mean), std=np.asarray(state.stats.std),
+             count=np.asarray(state.stats.count))
 
 
 def read_policy_info(directory: str | Path) -> dict:
@@ -82,3 +85,46 @@ def load_policy(directory: str | Path):
         raise ValueError(f"{folder}: theta has {arrays['theta'].shape} values, the "
                          f"{spec['kind']} policy needs {policy.size}")
     return policy, (arrays["theta"], arrays["mean"], arrays["std"]), info
+
+
+def warm_start(state: TrainState, directory: str | Path, spec: PolicySpec) -> TrainState:
+    """`state` with θ and the observation statistics of the saved PARS policy in `directory`
+    (with a seed axis, every seed starts from it): a training that fine-tunes a trained policy
+    under other settings. The statistics keep their weight (the observations the policy's run
+    had seen), so the inputs stay scaled as the policy was trained; a feature its run saw as
+    constant (std 1 saved) is held at mean ± 1. ValueError if the saved spec is not `spec`."""
+    policy, (theta, mean, std), info = load_policy(directory)
+    if policy.spec != spec:
+        raise ValueError(f"--init-policy {directory}: its policy is {policy.spec}, the "
+                         f"training's is {spec} (same kind, sizes, widths and input options)")
+    count = np.float32(observations_seen(Path(directory), info))
+    stats = state.stats.replace(count=count, mean=mean, m2=np.square(std) * count)
+
+    def fill(template, value):  # onto the state's shape: a seed axis, where there is one
+        return jax.numpy.broadcast_to(jax.numpy.asarray(value, template.dtype), template.shape)
+
+    return state.replace(theta=fill(state.theta, theta),
+                         stats=jax.tree.map(fill, state.stats, stats))
+
+
+def observations_seen(folder: Path, info: dict) -> float:
+    """How many observations a saved policy's statistics hold: policy.npz's count, or for a
+    policy saved before the count was kept, its run's env_steps at the policy's iteration
+    (metrics.jsonl of the run folder: the parent of policy/, of policies/NNNNN/ or of a
+    seed's folder); ValueError if neither is there."""
+    arrays = np.load(folder / "policy.npz")
+    if "count" in arrays:
+        return float(arrays["count"])
+    for run in (folder.parent, folder.parent.parent):
+        if (run / "metrics.jsonl").is_file():
+            lines = [json.loads(line) for line in (run / "metrics.jsonl").read_text().split("\n")
+                     if line.strip()]
+            steps = next((m.get("env_steps") for m in lines
+                          if m["iteration"] == info.get("iteration")), None)
+            if isinstance(steps, list):  # a run of several seeds: this policy's
+                steps = steps[info["seed"] - info["config"]["seed"]]
+            if steps:
+                return float(steps)
+    raise ValueError(f"{folder}: policy.npz has no count and no metrics.jsonl beside it gives "
+                     f"env_steps at iteration {info.get('iteration')}: the observations its "
+                     "statistics hold are unknown")

@@ -57,6 +57,9 @@ class TrainConfig:
       arming_level: with self_mask, the policy asks nothing until an action bus has been
         observed below this level (p.u.) after clearing, then is armed for the episode
         (`Problem.evaluator`), or None (not the paper's: it has no mask).
+      init_policy: a saved PARS policy folder to start from instead of θ = 0 and empty
+        statistics (`ars.checkpoint.warm_start`: fine-tuning), or None (the paper's). A
+        resumed run continues from its checkpoint.
     """
 
     policy: str = "lstm"
@@ -71,6 +74,7 @@ class TrainConfig:
     relative_inputs: bool = False
     self_mask: bool = False
     arming_level: float | None = None
+    init_policy: str | None = None
 
     def __post_init__(self):
         if self.iterations < 1 or self.checkpoint_every < 1 or (self.seeds or 1) < 1:
@@ -185,8 +189,11 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
                 "seeds": config.seeds, "iterations": config.iterations,
                 **({"self_mask": True} if config.self_mask else {}),  # policy.json as before
                 **({"arming_level": config.arming_level} if config.arming_level is not None
-                   else {})}
+                   else {}),
+                **({"init_policy": config.init_policy} if config.init_policy else {})}
     state, log = init_state(trainer.policy, config.pars, config.seeds), []
+    if config.init_policy and not config.resume:
+        state = checkpoint.warm_start(state, config.init_policy, trainer.spec)
     if config.resume:
         restored = checkpoint.restore_latest(mgr, state)
         if restored is None:

@@ -17,6 +17,8 @@ import time
 import numpy as np
 import pytest
 
+from ars import checkpoint
+from ars.pars import ParsConfig, init_state
 from conftest import REPO
 from experiments.common.evaluation import evaluate
 from experiments.common.pars_command import run
@@ -146,6 +148,37 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
     assert run(TINY + ["--out", str(straight)], "train_39bus") == 2
     assert "pass --resume" in capsys.readouterr().err
     assert (straight / "metrics.jsonl").read_text() == before, "a fresh run loses nothing"
+
+
+def test_a_training_starts_from_a_saved_policy_with_its_statistics(straight, tmp_path, capsys):
+    """--init-policy: the state starts at the saved θ and statistics, weighted by the
+    observations its run had seen (policy.npz's count, or for a policy saved without one,
+    its run's env_steps at that iteration), on every seed; the run records where it started,
+    and a policy of another shape is refused by name."""
+    source = straight / "policies" / "00006"
+    policy, (theta, mean, std), info = checkpoint.load_policy(source)
+    steps = [json.loads(line)["env_steps"] for line in _lines(straight / "metrics.jsonl")]
+    legacy = tmp_path / "runs" / "policy"  # saved before the count was kept
+    legacy.mkdir(parents=True)
+    (legacy / "policy.json").write_text((source / "policy.json").read_text())
+    np.savez(legacy / "policy.npz", theta=theta, mean=mean, std=std)
+    (tmp_path / "runs" / "metrics.jsonl").write_text((straight / "metrics.jsonl").read_text())
+    for folder in (source, legacy):
+        state = checkpoint.warm_start(init_state(policy, ParsConfig(), seeds=2), folder,
+                                      policy.spec)
+        np.testing.assert_array_equal(state.theta, np.stack([theta, theta]))
+        assert state.stats.count.tolist() == [steps[5]] * 2, "the run's observations at 6"
+        for seed in range(2):
+            np.testing.assert_allclose(state.stats.replace(
+                count=state.stats.count[seed], m2=state.stats.m2[seed]).std, std, rtol=1e-6)
+        np.testing.assert_array_equal(state.stats.mean, np.stack([mean, mean]))
+    out = tmp_path / "tuned"
+    assert run(TINY + ["--init-policy", str(source), "--iterations", "1", "--out", str(out)],
+               "train_39bus") == 0
+    assert json.loads((out / "policy" / "policy.json").read_text())["init_policy"] == str(source)
+    assert run(TINY + ["--history", "2", "--init-policy", str(source), "--iterations", "1",
+                       "--out", str(tmp_path / "other")], "train_39bus") == 2
+    assert f"--init-policy {source}: its policy is PolicySpec(" in capsys.readouterr().err
 
 
 def test_a_self_masked_armed_training_saves_its_arming(tmp_path, capsys):

@@ -55,6 +55,12 @@ def parser(command: str) -> argparse.ArgumentParser:
                         "varying input, in its units (p.u. for voltages; default: none, as "
                         "the paper): an input that hardly moves in training is scaled by at "
                         "most 1/FLOOR")
+    p.add_argument("--init-policy", metavar="DIR",
+                   help="start from this saved PARS policy (its θ and observation statistics) "
+                        "instead of θ = 0: fine-tuning a trained policy under other settings "
+                        "(its kind, sizes and input options must be this training's; pass "
+                        "--step-size and --noise where it left off, e.g. α·ε^iterations; "
+                        "default: none, the paper's)")
     p.add_argument("--history", type=int,
                    help="observations stacked (default: the study's for the policy kind, "
                         "[training] history; the PNNL study files give 10 for linear and FNN, "
