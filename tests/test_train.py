@@ -1,9 +1,9 @@
 """The training command: a run killed with SIGKILL resumes from its last checkpoint, loses
 at most --checkpoint-every iterations, and ends where an uninterrupted run ends; two
 processes joined by `jax.distributed` on loopback end where one process does; the saved
-policy and study load into the evaluation command; the PNNL 300-bus GridPACK files train
-from their own files. Tiny settings (linear policy, 1 direction, 1 task, 0.5 s episodes) keep
-it to a few compiles."""
+policy and study load into the evaluation command, and a training can start from it; the
+PNNL 300-bus GridPACK files train from their own files. Tiny settings (linear policy, 1
+direction, 1 task, 0.5 s episodes) keep it to a few compiles."""
 from __future__ import annotations
 
 import json
