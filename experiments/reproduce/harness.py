@@ -94,10 +94,12 @@ def write_report(out: Path, settings, quick: bool, study: str | None = None) -> 
     kept across runs. `study`: the study the main training ran on (what OUT/policy is
     compared with)."""
     lines = ["# PARS paper reproduction", "",
-             f"Settings: {'--quick (a pipeline check, not results)' if quick else 'full'}; "
+             f"Settings of the last invocation: "
+             f"{'--quick (a pipeline check, not results)' if quick else 'full'}; "
              f"{json.dumps(dataclasses.asdict(settings))}.", "",
-             "Each experiment ran on the study named under it; the paper's values are for the "
-             "paper's case and settings, given beside ours.", ""]
+             "Each experiment ran on the study named under it, in its own last invocation "
+             "(an experiment left out of the last one keeps its earlier figure and numbers); "
+             "the paper's values are for the paper's case and settings, given beside ours.", ""]
     if (out / "policy" / "policy.json").is_file():
         lines += [_policy_line(out / "policy", study), ""]
     for name in EXPERIMENTS:
