@@ -87,6 +87,11 @@ def load_policy(directory: str | Path):
     return policy, (arrays["theta"], arrays["mean"], arrays["std"]), info
 
 
+def metrics_rows(path: Path) -> list[dict]:
+    """The lines of a run's metrics.jsonl (`ars.train`), [] if there is none yet."""
+    return [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
+
+
 def warm_start(state: TrainState, directory: str | Path, spec: PolicySpec) -> TrainState:
     """`state` with θ and the observation statistics of the saved PARS policy in `directory`
     (with a seed axis, every seed starts from it): a training that fine-tunes a trained policy
@@ -116,15 +121,12 @@ def observations_seen(folder: Path, info: dict) -> float:
     if "count" in arrays:
         return float(arrays["count"])
     for run in (folder.parent, folder.parent.parent):
-        if (run / "metrics.jsonl").is_file():
-            lines = [json.loads(line) for line in (run / "metrics.jsonl").read_text().split("\n")
-                     if line.strip()]
-            steps = next((m.get("env_steps") for m in lines
-                          if m["iteration"] == info.get("iteration")), None)
-            if isinstance(steps, list):  # a run of several seeds: this policy's
-                steps = steps[info["seed"] - info["config"]["seed"]]
-            if steps:
-                return float(steps)
+        steps = next((m.get("env_steps") for m in metrics_rows(run / "metrics.jsonl")
+                      if m["iteration"] == info.get("iteration")), None)
+        if isinstance(steps, list):  # a run of several seeds: this policy's
+            steps = steps[info["seed"] - info["config"]["seed"]]
+        if steps:
+            return float(steps)
     raise ValueError(f"{folder}: policy.npz has no count and no metrics.jsonl beside it gives "
                      f"env_steps at iteration {info.get('iteration')}: the observations its "
                      "statistics hold are unknown")

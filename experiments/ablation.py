@@ -51,10 +51,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ars.checkpoint import metrics_rows
 from experiments.common.pars_command import parser as train_parser
 from experiments.common.scores import scores, targets_met
 from experiments.common.training import Choices, shaping
-from experiments.reproduce.runs import FULL, Runs, metrics_rows
+from experiments.reproduce.runs import FULL, Runs
 from jaxgrid.episode import check_arming_level
 
 SPEC_KEYS = {"out", "seeds", "iterations", "task_sets", "rows", "subsets"}

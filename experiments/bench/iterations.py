@@ -20,7 +20,6 @@ with another `[env]` step), with the same arguments but `--study`, after the pla
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -28,6 +27,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from ars.checkpoint import metrics_rows
 from experiments.bench.timing import write_report
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,8 +42,7 @@ def run_training(tree: Path, iterations: int, devices: int, train_args, out: Pat
     subprocess.run([sys.executable, "-m", "experiments.train", *train_args,
                     "--iterations", str(iterations), "--out", str(out)],
                    cwd=tree, env=env, check=True, stdout=subprocess.DEVNULL)
-    rows = [json.loads(line) for line in next(out.rglob("metrics.jsonl")).read_text().split("\n")
-            if line.strip()]
+    rows = metrics_rows(next(out.rglob("metrics.jsonl")))
     return [row["wall_s"] for row in sorted(rows, key=lambda r: r["iteration"])]
 
 

@@ -13,9 +13,10 @@ from __future__ import annotations
 import jax
 import numpy as np
 
+from ars.checkpoint import metrics_rows
 from experiments.common.curves import smoothed
 from experiments.reproduce import claims
-from experiments.reproduce.runs import Runs, convergence_iteration, metrics_rows
+from experiments.reproduce.runs import Runs, convergence_iteration
 
 # what a convergence row holds for a run that settles only in its last window, if at all
 NOT_SETTLED = "not settled"

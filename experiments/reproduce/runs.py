@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ars.checkpoint import metrics_rows
 from ars.pars import init_state
 from ars.train import make_trainer
 from experiments.reproduce.claims import best_ppo_seed
@@ -468,7 +469,3 @@ def _identity(control: str) -> str:
             digest.update(file.read_bytes())
     return f"{kind}:{digest.hexdigest()[:10]}"
 
-
-def metrics_rows(path: Path) -> list[dict]:
-    """The lines of a metrics.jsonl ([] if there is none yet)."""
-    return [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
