@@ -127,9 +127,9 @@ def known_task(state: EnvState, agent_dt: float) -> EnvState:
 
 
 def feasible(env: LoadSheddingEnv, state: EnvState, shed):
-    """`shed` (n_action,) limited to the load left at each action bus (none where it is
-    all shed, so no request is invalid)."""
-    left = state.grid.load_left[env.action_slots]
+    """`shed` (n_action,) limited to the load left to shed at each action bus
+    (`LoadSheddingEnv.sheddable`; none where nothing is, so no request is invalid)."""
+    left = env.sheddable(state.grid.load_left[env.action_slots])
     return jnp.where(left > 0, jnp.minimum(shed, left), 0.0)
 
 

@@ -9,11 +9,12 @@ The episode loop (a controller acting every agent step, vmapped over tasks) is
 `jaxgrid.episode`.
 
 Every agent step (0.1 s) the action sheds, per action bus, a fraction of its initial load
-(in [-0.2, 0], negative sheds, clipped to what remains; requests up to `action_deadband`
-are dropped); the grid then runs for one agent step of simulation steps. The observation is
-the voltage magnitude at the observed buses and (unless `include_action_status` is off) the
-remaining load fraction at the action buses, optionally the last k of them stacked: one
-per agent step, or one every `obs_interval` seconds within it.
+(in [-0.2, 0], negative sheds, clipped to what remains within `shed_limit`; requests up to
+`action_deadband` are dropped); the grid then runs for one agent step of simulation steps.
+The observation is the voltage magnitude at the observed buses and (unless
+`include_action_status` is off) the remaining load fraction at the action buses, optionally
+the last k of them stacked: one per agent step, or one every `obs_interval` seconds within
+it.
 The reward per step is
 
     c1·Σ_i ΔV_i − c2·Σ_j ΔP_j − c3·n_invalid − c_normal·n_normal − c_pre·n_prefault,
@@ -112,6 +113,7 @@ EPISODE = Range(0.0, 3600.0, "s", lo_open=True)
 HISTORY = Range(1, 1000, "observations")
 OBS_INTERVAL = Range(0.0, 60.0, "s", lo_open=True)
 ACTION_DEADBAND = Range(0.0, 1.0, "of the initial load per step")
+SHED_LIMIT = Range(0.0, 1.0, "of the initial load per episode", lo_open=True)
 ACTION_MASKS = ("none", "hadrec", "undervoltage")  # EnvConfig.action_mask
 
 
@@ -137,6 +139,11 @@ class EnvConfig:
       action_deadband: a request to shed at most this fraction of a bus's initial load is
         dropped: not applied and not penalised (HADREC's GridPACK environment: 0.01). 0:
         every request counts.
+      shed_limit: the most of each action bus's initial load an episode may shed (fraction):
+        a request is clipped to what remains above 1 − shed_limit, and one at a bus with
+        nothing left within the limit counts as an invalid request (the paper's "load ...
+        already shed to zero"). [choice]; default 1.0, the paper's (a bus may be shed to
+        zero); 0.6 gives every controller the three UVLS stages' authority (each 20 %).
       action_mask: "none" (every request is applied: the paper's Java environment, RLGC) or
         "hadrec" (its authors' GridPACK environment: a request at an action bus in normal
         operation, or in the first 0.15 s after clearing, is dropped: `jaxgrid.recovery.
@@ -157,6 +164,7 @@ class EnvConfig:
     obs_interval: float | None = None
     include_action_status: bool = True
     action_deadband: float = 0.0
+    shed_limit: float = 1.0
     action_mask: str = "none"
     recovery_buses: tuple[int, ...] | None = None
     bounds: Bounds = Bounds()
@@ -178,6 +186,7 @@ class EnvConfig:
                 _check_whole(span, length, "simulation steps", name, dt)
         check_int("history", self.history, HISTORY)
         ACTION_DEADBAND.check("action_deadband", self.action_deadband)
+        SHED_LIMIT.check("shed_limit", self.shed_limit)
         if self.action_mask not in ACTION_MASKS:
             raise InputError("action_mask", self.action_mask, f"must be one of {ACTION_MASKS}")
         if EPISODE.check("episode", self.episode) < self.agent_dt:
@@ -424,6 +433,12 @@ class LoadSheddingEnv:
                                                          jnp.arange(cfg.samples_per_step))
         return x, health, vm[-1], action_vm[-1], obs
 
+    def sheddable(self, load_left):
+        """(n_action,) fraction of each action bus's initial load still sheddable: what is
+        left of it (load_left, (n_action,)) above 1 − `EnvConfig.shed_limit`."""
+        limit = self.config.shed_limit
+        return load_left if limit == 1.0 else jnp.maximum(load_left - (1.0 - limit), 0.0)
+
     def step(self, state: EnvState, action, params: EnvParams, grid: GridModel):
         """(obs, state, reward, done, info) after one agent step with `action` (n_action,)."""
         cfg, task = self.config, state.task
@@ -432,7 +447,7 @@ class LoadSheddingEnv:
         request = -clip_closed(action, params.action_low, params.action_high)  # >= 0
         if cfg.action_deadband > 0:
             request = jnp.where(request > cfg.action_deadband, request, 0.0)
-        left = state.grid.load_left[self.action_slots]
+        left = self.sheddable(state.grid.load_left[self.action_slots])
         penalties = (params.c_invalid * invalid_requests(request, left)
                      + params.c_normal * normal_requests(request, state.action_vm,
                                                          t - task.fault_end)

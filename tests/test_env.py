@@ -128,6 +128,25 @@ def test_requests_within_the_action_deadband_are_dropped(study, grid, tasks):
     assert np.asarray(state.grid.load_left[env.action_slots]) == pytest.approx([1.0, 0.98, 1.0])
 
 
+def test_shed_limit_clips_requests_and_charges_them_past_it(study, grid, tasks):
+    """shed_limit = 0.6 (the three UVLS stages' sum): at buses with 0.5 and 0.4 of their
+    load left, 20 % requests shed 0.1 and nothing (charged as an invalid request, as at an
+    empty bus), the bus with all its load sheds 0.2; a bad limit is refused by name."""
+    env = study.env(shed_limit=0.6)
+    params = EnvParams()
+    _, state = env.reset(None, tasks[2], params, grid)
+    left = jnp.asarray(state.grid.load_left).at[env.action_slots[:2]].set(jnp.array([0.5, 0.4]))
+    state = state.replace(grid=state.grid.replace(load_left=left))
+    _, state, reward, _, info = jax.jit(env.step)(state, jnp.full(3, -0.2), params, grid)
+    p0 = np.asarray(grid.load_p0)[env.action_slots]
+    assert np.asarray(state.grid.load_left[env.action_slots]) == pytest.approx([0.4, 0.4, 0.8])
+    assert float(info["shed_pu"]) == pytest.approx(0.1 * p0[0] + 0.2 * p0[2], rel=1e-5)
+    assert float(reward) == pytest.approx(-150.0 * float(info["shed_pu"]) - 3.0 - 3 * 100.0,
+                                          rel=1e-5), "shed, one invalid, 3 pre-fault requests"
+    with pytest.raises(ValueError, match="shed_limit"):
+        study.env(shed_limit=0.0)
+
+
 def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(study, grid,
                                                                                 tasks):
     """With action_mask "hadrec" a request at a bus in normal operation is dropped (nothing
