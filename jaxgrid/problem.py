@@ -73,10 +73,10 @@ class PointEpisode:
 
 
 def play_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, specs,
-               policy_carry=None, trace: bool = False):
+               policy_carry=None, trace: bool = False, params: EnvParams | None = None):
     """Every task of `specs` in one compiled call: a vmap over their operating points (models
     batched; none for one point) of `jaxgrid.episode.play_tasks` over each point's tasks (one
-    model shared).
+    model shared), rewarded with `params` (default the study's).
 
     Every operating point of `specs` must have the same number of tasks (task sets do).
     Returns (specs in the order of the results, `play`'s dict with a leading axis).
@@ -89,9 +89,10 @@ def play_specs(study: Study, env: LoadSheddingEnv, policy_apply, policy_params, 
     shape = (len(points), len(groups[0]))
     tasks = jax.tree.map(lambda a: a.reshape(shape + a.shape[1:]), study.batch(ordered).task)
     models = jax.tree.map(lambda a: a[np.array(points)], study.models)
+    params = study.params if params is None else params
     with jax.enable_x64(env.precision == "float64"):
-        out = _points_play(env, policy_apply, trace)(models, tasks, study.params,
-                                                     policy_params, policy_carry)
+        out = _points_play(env, policy_apply, trace)(models, tasks, params, policy_params,
+                                                     policy_carry)
     out = jax.tree.map(lambda a: np.asarray(a).reshape((len(ordered),) + a.shape[2:]), out)
     return ordered, out
 
@@ -172,6 +173,16 @@ def run_info(study: Study, env_config: EnvConfig, task_set: str) -> dict:
             "episode": env_config.episode}
 
 
+# c_quiet, c_beat and beat_scale of `training_problem`'s shaping (not EnvParams fields: the
+# environment cannot know whether a task would recover without control, or what another
+# controller earns on it; the training problem can)
+QUIET_CHARGE = Range(0.0, 1e9, "per p.u. of load shed on a task that recovers without control")
+BEAT_BONUS = Range(0.0, 1e9, "reward units, the most an episode gains or loses against UVLS")
+BEAT_SCALE = Range(0.0, 1e9, "reward units", lo_open=True)
+SHAPING_TERMS = {"c_quiet": QUIET_CHARGE, "c_beat": BEAT_BONUS, "beat_scale": BEAT_SCALE}
+DEFAULT_BEAT_SCALE = 100.0  # reward units: the 300-bus policy's narrow losses to UVLS, 8-237
+
+
 @dataclasses.dataclass(frozen=True)
 class GridProblem:
     """A study's task set as a training problem (the fields of `ars.train.Problem`).
@@ -187,6 +198,9 @@ class GridProblem:
         set, task sampling, layout, history, episode).
       quiet_charge: c_quiet (`training_problem`), per p.u. of load shed on a task that
         recovers without control (`tasks.quiet`); 0: none.
+      beat_bonus, beat_scale: c_beat and beat_scale (`training_problem`): each episode's
+        reward r gains beat_bonus·tanh((r − r_ref)/beat_scale), r_ref the reference
+        controller's reward on its task (`tasks.reference_reward`); 0: none.
     """
 
     network = staticmethod(batch_major)  # a policy network runs batch-first in the episodes
@@ -203,12 +217,15 @@ class GridProblem:
     sampler: Callable | None
     info: dict
     quiet_charge: float = 0.0
+    beat_bonus: float = 0.0
+    beat_scale: float = DEFAULT_BEAT_SCALE
 
     def evaluator(self, apply, carry, mesh, self_mask: bool = False,
                   arming_level: float | None = None, **batching) -> Callable:
         """The problem's `evaluate` of a population of `apply` (`jaxgrid.population.evaluator`
         of `PointEpisode`; batching: task_batch, compact_after, compact_chunks), each
-        episode's reward less quiet_charge·(its load shed, p.u.) on the quiet tasks.
+        episode's reward less quiet_charge·(its load shed, p.u.) on the quiet tasks, plus
+        the beat bonus against the reference controller (class docstring).
         self_mask: `apply` masks its own requests with the study's action mask
         (`jaxgrid.episode.masked`), so a request the mask would drop is never made (nor
         charged c_normal or c_prefault); ValueError on a study without one. arming_level
@@ -220,29 +237,30 @@ class GridProblem:
                                  "([env] action_mask) for the policy to mask its requests with")
             apply = episode.masked(apply, mask, self.env, arming_level)
         evaluate = population.evaluator(self.episode, apply, carry, mesh, **batching)
-        if not self.quiet_charge:
+        if not (self.quiet_charge or self.beat_bonus):
             return evaluate
 
-        def charged(thetas, shared, tasks: PointTask, data):
+        def shaped(thetas, shared, tasks: PointTask, data):
             out = evaluate(thetas, shared, tasks, data)  # (P, m) per episode
-            charge = self.quiet_charge * out["shed_pu"] * tasks.quiet
-            return {**out, "reward": out["reward"] - charge.astype(out["reward"].dtype)}
+            reward = out["reward"]
+            if self.quiet_charge:
+                reward = reward - self.quiet_charge * out["shed_pu"] * tasks.quiet
+            if self.beat_bonus:
+                margin = (out["reward"] - tasks.reference_reward) / self.beat_scale
+                reward = reward + self.beat_bonus * jnp.tanh(margin)
+            return {**out, "reward": reward.astype(out["reward"].dtype)}
 
-        return charged
+        return shaped
 
     def save(self, folder: Path) -> None:
         """The resolved study as folder/study.toml (a run folder alone reproduces it)."""
         write_study(self.study, Path(folder) / "study.toml")
 
 
-# c_quiet of `training_problem`'s shaping (not an EnvParams field: the environment cannot
-# know whether a task would recover without control; the training problem can)
-QUIET_CHARGE = Range(0.0, 1e9, "per p.u. of load shed on a task that recovers without control")
-
-
 def training_problem(study: Study, policy_kind: str, history: int | None = None,
                      episode: float | None = None, task_set: str = "train",
-                     sampling: str | None = None, shaping: dict | None = None) -> GridProblem:
+                     sampling: str | None = None, shaping: dict | None = None,
+                     reference: Callable | None = None) -> GridProblem:
     """The task set `task_set` of `study` (or several joined by "+", `Study.tasks`) for a
     `policy_kind` policy: episodes of `episode` s (default the study's), `history`
     observations stacked (default the study's for the kind), tasks drawn by `sampling`
@@ -251,14 +269,23 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
     only; evaluations keep the study's). shaping's "c_quiet" (`QUIET_CHARGE`) charges, on
     top, each p.u. of load shed on a task that recovers without control (`quiet_tasks`, run
     once here): a label only a trainer has, so it shapes training and enters no
-    evaluation. The data holds only the set's operating points."""
+    evaluation. Its "c_beat" (`BEAT_BONUS`) adds to each training episode's reward r
+    c_beat·tanh((r − r_ref)/beat_scale) (`BEAT_SCALE`, default `DEFAULT_BEAT_SCALE`), r_ref
+    the reward of `reference` (env -> (apply, params, carry), e.g. `baselines.uvls.
+    uvls_policy`) on its task under the training's weights (`reference_rewards`, run once
+    here): the training then values beating that controller on a task, however narrowly,
+    beside the reward itself. The data holds only the set's operating points."""
     history = study.history(policy_kind) if history is None else history
     sampling = sampling or study.definition.training.task_sampling
     overrides = {k: v for k, v in (("history", history), ("episode", episode)) if v is not None}
     env = study.env(**overrides)
     weights = dict(shaping or {})
-    quiet_charge = float(weights.pop("c_quiet", 0.0))
-    QUIET_CHARGE.check("c_quiet", quiet_charge)
+    terms = {name: allowed.check(name, weights.pop(name))
+             for name, allowed in SHAPING_TERMS.items() if name in weights}
+    quiet_charge, beat_bonus = terms.get("c_quiet", 0.0), terms.get("c_beat", 0.0)
+    if beat_bonus and reference is None:
+        raise ValueError("c_beat: a reference controller is needed (training_problem's "
+                         "reference)")
     params = dataclasses.replace(study.params, **weights)
     if sampling == "stratified" and "+" in task_set:
         raise ValueError(f"--task-set {task_set}: stratified sampling draws from one task set")
@@ -274,22 +301,44 @@ def training_problem(study: Study, policy_kind: str, history: int | None = None,
         print(f"c_quiet = {quiet_charge:g}: {int(quiet.sum())} of {len(quiet)} training tasks "
               "recover without control")
         tasks = tasks.replace(quiet=quiet)
+    if beat_bonus:
+        earned = reference_rewards(study, env, params, reference(env), chosen)
+        print(f"c_beat = {beat_bonus:g}: the reference earns {earned.mean():.1f} per training "
+              "task on average")
+        tasks = tasks.replace(reference_reward=earned.astype(np.dtype(env.precision)))
     return GridProblem(
         study, env, PointEpisode(env, params), tasks,
         jax.tree.map(lambda a: a[np.array(points)], study.models),
         env.config.history * env.obs_size, len(env.action_slots), float(params.action_low),
         float(params.action_high),
         (functools.partial(stratified_sampler, study.task_set(task_set), study.n_points)
-         if sampling == "stratified" else None), info, quiet_charge)
+         if sampling == "stratified" else None), info, quiet_charge, beat_bonus,
+        terms.get("beat_scale", DEFAULT_BEAT_SCALE))
 
 
 def quiet_tasks(study: Study, env: LoadSheddingEnv, specs) -> np.ndarray:
     """(len(specs),) bool: each task of `specs` recovers in `env` with no shedding (one
-    uncontrolled episode each, `play_specs` per operating point)."""
-    idle = episode.idle_controller(len(env.action_slots))
-    recovered = {}
+    uncontrolled episode each)."""
+    idle = (episode.idle_controller(len(env.action_slots)), None, None)
+    return _per_task(study, env, idle, specs, "recovered").astype(bool)
+
+
+def reference_rewards(study: Study, env: LoadSheddingEnv, params: EnvParams, controller,
+                      specs) -> np.ndarray:
+    """(len(specs),) the reward `controller` ((apply, params, carry)) earns on each task of
+    `specs` in `env`, rewarded with `params` (one episode each)."""
+    return _per_task(study, env, controller, specs, "reward", params)
+
+
+def _per_task(study: Study, env: LoadSheddingEnv, controller, specs, key: str,
+              params=None) -> np.ndarray:
+    """`play_specs`'s result `key` of `controller` ((apply, params, carry)) on each task of
+    `specs`, in their order (one call per operating point: their task counts may differ)."""
+    apply, policy_params, carry = controller
+    played = {}
     for point in sorted({s.operating_point for s in specs}):
-        ordered, out = play_specs(study, env, idle, None,
-                                  [s for s in specs if s.operating_point == point])
-        recovered.update(zip(ordered, out["recovered"]))
-    return np.array([bool(recovered[s]) for s in specs])
+        ordered, out = play_specs(study, env, apply, policy_params,
+                                  [s for s in specs if s.operating_point == point], carry,
+                                  params=params)
+        played.update(zip(ordered, out[key]))
+    return np.array([played[s] for s in specs])

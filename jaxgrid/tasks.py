@@ -107,11 +107,14 @@ class PointTask:
       point: () int index into the study's operating points.  task: the `simulate.Task`.
       quiet: () bool, the task recovers without control (a training label,
         `jaxgrid.problem.training_problem`'s c_quiet), or None where no one asked.
+      reference_reward: () the reward a reference controller (UVLS) earns on the task (a
+        training label, `training_problem`'s c_beat), or None where no one asked.
     """
 
     point: np.ndarray
     task: Task
     quiet: np.ndarray | None = None
+    reference_reward: np.ndarray | None = None
 
 
 def task_batch(model: GridModel, specs: Sequence[TaskSpec]) -> PointTask:

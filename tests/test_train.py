@@ -6,6 +6,7 @@ PNNL 300-bus GridPACK files train from their own files. Tiny settings (linear po
 direction, 1 task, 0.5 s episodes) keep it to a few compiles."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -297,6 +298,44 @@ def test_c_quiet_charges_shedding_on_the_tasks_that_recover_without_control(monk
     np.testing.assert_allclose(out["reward"], [[-260.0, -20.0, -30.0], [-51.0, -2.0, -103.0]])
     with pytest.raises(ValueError, match=r"--shaping c_quiet = -1.0: must lie in"):
         shaping(["c_quiet=-1"])
+
+
+def test_c_beat_rewards_beating_uvls_on_each_training_task(monkeypatch, ieee39):
+    """--shaping c_beat=B beat_scale=S labels each training task with the reward UVLS earns
+    on it (the evaluation's, `experiments.common.evaluation.evaluate`) and adds
+    B·tanh((r − r_UVLS)/S) to each training episode's reward r, beside c_quiet's charge;
+    without a reference controller, or with S <= 0, it names what is wrong."""
+    from experiments.common.evaluation import evaluate
+    from experiments.common.training import Choices, problem, shaping
+    from jaxgrid import population
+    from jaxgrid.problem import training_problem
+
+    weights = shaping(["c_beat=200", "beat_scale=50", "c_quiet=100"])
+    trained = problem(ieee39, dataclasses.replace(Choices(), shaping=weights))
+    assert (trained.beat_bonus, trained.beat_scale, trained.quiet_charge) == (200, 50, 100)
+    uvls = {(t["fault_bus"], t["fault_duration"]): t["reward"]
+            for t in evaluate(ieee39, "uvls", "train")["tasks"]}
+    labels = dict(zip([(s.fault_bus, s.fault_duration) for s in ieee39.tasks("train")],
+                      trained.tasks.reference_reward))
+    assert labels.keys() == uvls.keys()
+    for task, reward in uvls.items():  # float32 episodes, the same program
+        assert labels[task] == pytest.approx(reward, rel=1e-5, abs=1e-3), task
+    assert min(uvls.values()) < -100 < max(uvls.values()), "failing and recovering tasks"
+
+    reward = np.array([[-10.0, -200.0], [-60.0, -2.0]], np.float32)  # (P, m), as episodes'
+    shed = np.array([[0.5, 0.0], [0.1, 0.2]], np.float32)
+    monkeypatch.setattr(population, "evaluator", lambda *a, **k: (
+        lambda thetas, shared, tasks, data: {"reward": reward, "shed_pu": shed}))
+    tasks = trained.tasks.replace(quiet=np.array([True, False]),
+                                  reference_reward=np.array([-60.0, -100.0]))
+    out = trained.evaluator(None, None, None)(None, None, tasks, None)
+    bonus = 200 * np.tanh((reward - [-60.0, -100.0]) / 50)
+    np.testing.assert_allclose(out["reward"], reward - 100 * shed * [1, 0] + bonus, rtol=1e-5)
+    assert out["reward"][1, 0] == pytest.approx(-70.0), "a tie: no bonus, c_quiet's charge"
+    with pytest.raises(ValueError, match=r"c_beat: a reference controller is needed"):
+        training_problem(ieee39, "lstm", shaping={"c_beat": 1.0})
+    with pytest.raises(ValueError, match=r"--shaping beat_scale = 0.0: must lie in \(0, "):
+        shaping(["beat_scale=0"])
 
 
 def test_task_batch_auto_is_every_task_on_a_gpu_and_the_preset_elsewhere(monkeypatch, capsys):

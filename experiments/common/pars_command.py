@@ -98,9 +98,10 @@ def parser(command: str) -> argparse.ArgumentParser:
     p.add_argument("--shaping", nargs="+", default=(), metavar="FIELD=VALUE",
                    help="reward weights used in training only, e.g. c_normal=30 (fields of "
                         "the study's [params]: c_voltage, c_shed, c_invalid, c_normal, "
-                        "c_prefault, unstable_penalty; and c_quiet, a charge per p.u. shed "
-                        "on a training task that recovers without control); evaluations "
-                        "keep the study's")
+                        "c_prefault, unstable_penalty; c_quiet, a charge per p.u. shed "
+                        "on a training task that recovers without control; c_beat, a bonus "
+                        "c_beat·tanh((r - r_UVLS)/beat_scale) per training episode, "
+                        "beat_scale default 100); evaluations keep the study's")
     p.add_argument("--iterations", type=int, default=defaults["iterations"],
                    help="total iterations of the run (with --resume: continue up to it)")
     p.add_argument("--seed", type=int, default=Choices.seed)

@@ -123,23 +123,26 @@ def train_config(study, choices: Choices = Choices()) -> TrainConfig:
 
 def problem(study, choices: Choices = Choices()):
     """The study's side of the training: `jaxgrid.problem.training_problem` of the chosen
-    policy kind, history, episode, task set and sampling."""
+    policy kind, history, episode, task set and sampling; UVLS the reference of c_beat."""
+    from baselines.uvls import uvls_policy
     from jaxgrid.problem import training_problem
 
     return training_problem(study, choices.policy, choices.history, choices.episode,
-                            choices.task_set, choices.task_sampling, dict(choices.shaping))
+                            choices.task_set, choices.task_sampling, dict(choices.shaping),
+                            reference=uvls_policy)
 
 
 SHAPING_FIELDS = ("c_voltage", "c_shed", "c_invalid", "c_normal", "c_prefault",
-                  "unstable_penalty", "c_quiet")
+                  "unstable_penalty", "c_quiet", "c_beat", "beat_scale")
 
 
 def shaping(items) -> tuple[tuple[str, float], ...]:
     """`Choices.shaping` of --shaping FIELD=VALUE items (reward weights of
-    `jaxgrid.env.EnvParams`, in their ranges, and c_quiet, `jaxgrid.problem.
-    training_problem`'s); ValueError naming the flag and the item."""
+    `jaxgrid.env.EnvParams`, in their ranges, and c_quiet, c_beat (against UVLS) and
+    beat_scale, `jaxgrid.problem.training_problem`'s); ValueError naming the flag and the
+    item."""
     from jaxgrid.env import check_params
-    from jaxgrid.problem import QUIET_CHARGE
+    from jaxgrid.problem import SHAPING_TERMS
 
     pairs = []
     for item in items:
@@ -151,8 +154,8 @@ def shaping(items) -> tuple[tuple[str, float], ...]:
             number = float(value)
         except ValueError:
             raise ValueError(f"--shaping {item!r}: VALUE must be a number") from None
-        if field == "c_quiet":
-            QUIET_CHARGE.check("--shaping c_quiet", number)
+        if field in SHAPING_TERMS:
+            SHAPING_TERMS[field].check(f"--shaping {field}", number)
         else:
             check_params({field: number}, key=lambda f: f"--shaping {f}")
         pairs.append((field, number))
