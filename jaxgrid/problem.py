@@ -200,7 +200,7 @@ class GridProblem:
         recovers without control (`tasks.quiet`); 0: none.
       beat_bonus, beat_scale: c_beat and beat_scale (`training_problem`): each episode's
         reward r gains beat_bonus·tanh((r − r_ref)/beat_scale), r_ref the reference
-        controller's reward on its task (`tasks.reference_reward`); 0: none.
+        controller's reward on its task (`tasks.reference_reward`); beat_bonus 0: none.
     """
 
     network = staticmethod(batch_major)  # a policy network runs batch-first in the episodes
