@@ -304,7 +304,7 @@ def test_c_beat_rewards_beating_uvls_on_each_training_task(monkeypatch, ieee39):
     """--shaping c_beat=B beat_scale=S labels each training task with the reward UVLS earns
     on it (the evaluation's, `experiments.common.evaluation.evaluate`) and adds
     B·tanh((r − r_UVLS)/S) to each training episode's reward r, beside c_quiet's charge;
-    without a reference controller, or with S <= 0, it names what is wrong."""
+    without a reference controller, with S <= 0 or S without B, it names what is wrong."""
     from experiments.common.evaluation import evaluate
     from experiments.common.training import Choices, problem, shaping
     from jaxgrid import population
@@ -336,6 +336,8 @@ def test_c_beat_rewards_beating_uvls_on_each_training_task(monkeypatch, ieee39):
         training_problem(ieee39, "lstm", shaping={"c_beat": 1.0})
     with pytest.raises(ValueError, match=r"--shaping beat_scale = 0.0: must lie in \(0, "):
         shaping(["beat_scale=0"])
+    with pytest.raises(ValueError, match=r"beat_scale scales c_beat's bonus; give c_beat=B"):
+        shaping(["c_quiet=100", "beat_scale=50"])
 
 
 def test_task_batch_auto_is_every_task_on_a_gpu_and_the_preset_elsewhere(monkeypatch, capsys):

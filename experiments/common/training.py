@@ -140,7 +140,7 @@ def shaping(items) -> tuple[tuple[str, float], ...]:
     """`Choices.shaping` of --shaping FIELD=VALUE items (reward weights of
     `jaxgrid.env.EnvParams`, in their ranges, and c_quiet, c_beat (against UVLS) and
     beat_scale, `jaxgrid.problem.training_problem`'s); ValueError naming the flag and the
-    item."""
+    item (beat_scale without c_beat is one)."""
     from jaxgrid.env import check_params
     from jaxgrid.problem import SHAPING_TERMS
 
@@ -159,8 +159,12 @@ def shaping(items) -> tuple[tuple[str, float], ...]:
         else:
             check_params({field: number}, key=lambda f: f"--shaping {f}")
         pairs.append((field, number))
-    if len({f for f, _ in pairs}) < len(pairs):
+    fields = [f for f, _ in pairs]
+    if len(set(fields)) < len(fields):
         raise ValueError(f"--shaping {' '.join(items)}: a field given twice")
+    if "beat_scale" in fields and "c_beat" not in fields:
+        raise ValueError(f"--shaping {' '.join(items)}: beat_scale scales c_beat's bonus; give "
+                         "c_beat=B with it")
     return tuple(pairs)
 
 
