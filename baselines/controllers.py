@@ -48,7 +48,8 @@ class Controller:
       info: a saved policy's run information (policy.json), {} for the others.
       own_mask: the action mask a saved policy applies to its own requests (`load`), None
         when it applies none.  arming_level: p.u., the level below which an action bus arms
-        that mask (`load`), None for none.
+        that mask (`load`), None for none.  arming_late: s after clearing from which a bus
+        of the recovery check below the recovery level arms it too (`load`), None for none.
     """
 
     spec: str
@@ -61,6 +62,7 @@ class Controller:
     info: dict = dataclasses.field(default_factory=dict)
     own_mask: str | None = None
     arming_level: float | None = None
+    arming_late: float | None = None
 
 
 def no_control(env: LoadSheddingEnv):
@@ -125,8 +127,8 @@ SAVED_KINDS = {"policy": None, "ppo": "ppo"}  # prefix -> the "kind" its policy.
 ARGUMENT = {"none": False, "uvls": False, "mpc": None}  # takes none / may take one (else: must)
 
 
-def load(spec: str, study, own_mask: bool = True, arming_level: float | None = None
-         ) -> Controller:
+def load(spec: str, study, own_mask: bool = True, arming_level: float | None = None,
+         arming_late: float | None = None) -> Controller:
     """The controller `spec` (module docstring) on `study`'s environment; ValueError naming
     the spec if it is none of `SPECS`, or a saved policy that does not fit the study.
 
@@ -139,7 +141,8 @@ def load(spec: str, study, own_mask: bool = True, arming_level: float | None = N
     mask is armed (`jaxgrid.episode.masked`) at policy.json's "arming_level" (trained with
     `--arming-level`, or set where it is installed) or at `arming_level` (p.u.) in its place,
     wherever it runs: a setting of the policy's supervision, as a relay's is set where it is
-    installed (ValueError for a policy trained without a mask). own_mask=False leaves its
+    installed (ValueError for a policy trained without a mask); likewise its late arming
+    (policy.json's "arming_late", or `arming_late`, s). own_mask=False leaves its
     requests unmasked and unarmed (they then pass otherwise than in training, which the
     warning says). [choice]; the PNNL study's policies have no mask, so neither changes
     them."""
@@ -151,10 +154,12 @@ def load(spec: str, study, own_mask: bool = True, arming_level: float | None = N
     trained, here = controller.info.get("action_mask", "none"), controller.env.config.action_mask
     armed = controller.info.get("self_mask", False)
     level = controller.info.get("arming_level") if arming_level is None else arming_level
-    if arming_level is not None and trained == "none":
-        raise ValueError(f"--arming-level: {spec} was trained without an action mask, so it "
-                         "has no mask to arm")
-    if trained == "none" or (trained == here and not armed and level is None):
+    late = controller.info.get("arming_late") if arming_late is None else arming_late
+    for flag, given in (("--arming-level", arming_level), ("--arming-late", arming_late)):
+        if given is not None and trained == "none":
+            raise ValueError(f"{flag}: {spec} was trained without an action mask, so it has "
+                             "no mask to arm")
+    if trained == "none" or (trained == here and not armed and level is None and late is None):
         return controller
     if trained != here:
         warnings.warn(f"{spec} was trained with action_mask = {trained!r} (study "
@@ -165,8 +170,8 @@ def load(spec: str, study, own_mask: bool = True, arming_level: float | None = N
     if not own_mask:
         return controller
     return dataclasses.replace(controller, apply=masked(controller.apply, trained,
-                                                        controller.env, level),
-                               own_mask=trained, arming_level=level)
+                                                        controller.env, level, late),
+                               own_mask=trained, arming_level=level, arming_late=late)
 
 
 def _saved(spec: str, path: str, kind: str | None) -> str:

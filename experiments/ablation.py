@@ -30,7 +30,9 @@ the file) trains nothing: that controller is scored as one seed; a list of specs
 (`controller = ["policy:runs/a/seed0", "policy:runs/b/seed0"]`) is scored as that many seeds,
 e.g. the seeds of a training made elsewhere, or before a change to the simulator. A row's
 `arming_level = 0.8` (p.u.) scores its saved policies, trained with --self-mask, armed only
-once an action bus falls below that level (`experiments.evaluate --arming-level`). Each row's
+once an action bus falls below that level (`experiments.evaluate --arming-level`);
+`arming_late = 3.0` (s) arms them as well while a bus of the recovery check is below the
+recovery level that long after clearing (`--arming-late`). Each row's
 seeds train as one program in a run folder named by the study and the training
 (`experiments.reproduce.runs.Runs`: a finished row is reused, an interrupted one resumes);
 every seed's final policy, no control and UVLS are evaluated on each task set in the row's
@@ -56,10 +58,10 @@ from experiments.common.pars_command import parser as train_parser
 from experiments.common.scores import scores, targets_met
 from experiments.common.training import Choices, shaping
 from experiments.reproduce.runs import FULL, Runs
-from jaxgrid.episode import check_arming_level
+from jaxgrid.episode import check_arming_late, check_arming_level
 
 SPEC_KEYS = {"out", "seeds", "iterations", "task_sets", "rows", "subsets"}
-ROW_KEYS = {"name", "study", "flags", "why", "controller", "arming_level"}
+ROW_KEYS = {"name", "study", "flags", "why", "controller", "arming_level", "arming_late"}
 SUBSET_KEYS = {"of", "points", "why"}
 
 
@@ -67,7 +69,8 @@ SUBSET_KEYS = {"of", "points", "why"}
 class Row:
     """One configuration: name, study file (absolute), experiments.train flags, why; or
     fixed controller specs (paths absolute), one per seed, evaluated instead of a training;
-    arming_level: p.u., the saved policies' arming level when scored, or None (theirs)."""
+    arming_level: p.u., the saved policies' arming level when scored, or None (theirs);
+    arming_late: s, their late arming (`jaxgrid.episode.masked`), or None (theirs)."""
 
     name: str
     study: str
@@ -75,6 +78,7 @@ class Row:
     why: str
     controllers: tuple[str, ...] = ()
     arming_level: float | None = None
+    arming_late: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,10 +140,11 @@ def read_spec(path: str | Path) -> Spec:
             raise ValueError(f"{where}.controller = {controller!r}: a controller spec string "
                              "or a non-empty list of them (one per seed), in a row without "
                              "flags")
-        level = row.get("arming_level")
+        level, late = row.get("arming_level"), row.get("arming_late")
         check_arming_level(level, f"{where}.arming_level")
+        check_arming_late(late, level, f"{where}.arming_late")
         rows.append(Row(row["name"], str(study), tuple(flags), row.get("why", ""),
-                        tuple(_beside(path, c) for c in listed or ()), level))
+                        tuple(_beside(path, c) for c in listed or ()), level, late))
     names = [r.name for r in rows]
     if len(set(names)) < len(names):
         raise ValueError(f"{path}: rows: a name used twice in {names}")
@@ -213,8 +218,9 @@ def run_row(spec: Spec, row: Row, train: bool, studies: dict) -> dict | None:
         none, uvls = (at_points(evaluation(c, task_set), points) for c in ("none", "uvls"))
         record[name] = {
             "uvls": scores(none, uvls, uvls),
-            "seeds": [scores(none, uvls, at_points(evaluation(c, task_set, row.arming_level),
-                                                   points)) for c in controllers]}
+            "seeds": [scores(none, uvls, at_points(
+                evaluation(c, task_set, row.arming_level, row.arming_late), points))
+                for c in controllers]}
     return record
 
 

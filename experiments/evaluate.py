@@ -19,7 +19,7 @@ policy:PATH, PPO: ppo:PATH, a folder written by `experiments.train` or
 policy trained under an action mask the study lacks, or trained with --self-mask, masks its
 own requests as in training (the result then holds "own_mask"; --no-own-mask: unmasked); one
 trained under a mask is armed at the level its policy.json gives or at --arming-level's (the
-result then holds "arming_level"). Where a
+result then holds "arming_level"), and late as its policy.json or --arming-late says. Where a
 published file has a training log beside it, each task of the first operating point that
 the log has gains "log_reward" (null for the others), and the result "log" {"path",
 "iteration"}: `experiments.compare` sets them side by side. The work is
@@ -57,11 +57,16 @@ def main(argv: list[str] | None = None) -> int:
                    help="p.u.: a saved policy trained under an action mask asks to shed "
                         "nothing until an action bus has fallen below this level after "
                         "clearing, in place of its policy.json's (default: that, if any)")
+    p.add_argument("--arming-late", type=float,
+                   help="s: with an arming level, the policy is armed as well while, this "
+                        "long or longer after clearing, a bus of the recovery check is below "
+                        "the recovery level, in place of its policy.json's (default: that, "
+                        "if any)")
     args = p.parse_args(argv)
     try:
         study = study_from_args(args)
         result = evaluate(study, args.controller, args.tasks, args.plot, args.plot_count,
-                          args.own_mask, args.arming_level)
+                          args.own_mask, args.arming_level, args.arming_late)
     except (ValueError, KeyError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -104,19 +104,33 @@ def idle_controller(n_action: int) -> Callable:
 
 
 ARMING_LEVELS = (0.0, 2.0)  # p.u., open bounds of an arming level
+ARMING_LATE = (0.0, 60.0)  # s after clearing, open bounds of a late arming
+
+
+def _check_open(value, bounds, name: str, unit: str) -> None:
+    low, high = bounds
+    if value is not None and not (isinstance(value, (int, float)) and not isinstance(value, bool)
+                                  and low < value < high):
+        raise ValueError(f"{name} = {value!r}: allowed {low:g} < {unit} < {high:g}")
 
 
 def check_arming_level(level, name: str = "--arming-level") -> None:
     """ValueError naming `name` unless `level` is None or a number in the open range
     ARMING_LEVELS (p.u.)."""
-    low, high = ARMING_LEVELS
-    if level is not None and not (isinstance(level, (int, float)) and not isinstance(level, bool)
-                                  and low < level < high):
-        raise ValueError(f"{name} = {level!r}: allowed {low:g} < p.u. < {high:g}")
+    _check_open(level, ARMING_LEVELS, name, "p.u.")
 
 
-def masked(apply, mask: str, env: LoadSheddingEnv, arming_level: float | None = None
-           ) -> Callable:
+def check_arming_late(late, level, name: str = "--arming-late") -> None:
+    """ValueError naming `name` unless `late` is None, or a number in the open range
+    ARMING_LATE (s) beside an arming `level` (without one the policy is always armed)."""
+    _check_open(late, ARMING_LATE, name, "s")
+    if late is not None and level is None:
+        raise ValueError(f"{name} = {late!r}: needs an arming level (--arming-level), "
+                         "which it adds a second way to arm to")
+
+
+def masked(apply, mask: str, env: LoadSheddingEnv, arming_level: float | None = None,
+           arming_late: float | None = None) -> Callable:
     """The controller `apply` (this module's signature) with its actions at the action buses
     that `mask` does not let shed (`jaxgrid.env.mask_passes` on the episode's state: the bus
     voltages at the request and the time since clearing) set to 0 (no request): a policy
@@ -124,10 +138,14 @@ def masked(apply, mask: str, env: LoadSheddingEnv, arming_level: float | None = 
     GridProblem.evaluator`'s self_mask, `baselines.controllers.load`). With `arming_level`
     (p.u.) it requests nothing at all until an action bus has been observed below that level
     at least the mask's hold after clearing (`EnvState.lowest_action_vm`), and stays armed
-    for the episode: a far fault that only dips the voltages leaves it alone (ValueError
-    outside `ARMING_LEVELS`)."""
+    for the episode: a far fault that only dips the voltages leaves it alone. With
+    `arming_late` (s) it is armed as well while, that long or longer after clearing, a bus
+    of the recovery check is below the recovery level (`EnvParams.recovery_level`): a slow
+    sag that never dips an action bus below `arming_level` but would fail the check.
+    ValueError outside `ARMING_LEVELS`, `ARMING_LATE` (`check_arming_late`)."""
     check_arming_level(arming_level)
-    agent_dt = env.config.agent_dt
+    check_arming_late(arming_late, arming_level)
+    agent_dt, n_observed = env.config.agent_dt, len(env.observed)
 
     def apply_masked(params, obs, carry, inputs: ControlInputs):
         action, carry = apply(params, obs, carry, inputs)
@@ -135,7 +153,12 @@ def masked(apply, mask: str, env: LoadSheddingEnv, arming_level: float | None = 
         t = state.step.astype(inputs.grid.network.real_dtype) * agent_dt
         passes = mask_passes(mask, state, t, inputs.params)
         if arming_level is not None:
-            passes &= state.lowest_action_vm < arming_level
+            armed = state.lowest_action_vm < arming_level
+            if arming_late is not None:
+                vm = state.history[-1, :n_observed]  # the newest observation's voltages
+                armed |= (t - state.task.fault_end >= arming_late) & jnp.any(
+                    state.recovery_check & (vm < inputs.params.recovery_level))
+            passes &= armed
         return jnp.where(passes, action, jnp.zeros_like(action)), carry
 
     return apply_masked

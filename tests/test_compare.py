@@ -113,7 +113,7 @@ def test_ablation_file_rows_and_table(tmp_path):
         'flags = ["--shaping", "c_normal=30", "--iterations", "9"]\nwhy = "charge"\n'
         '[[rows]]\nname = "fixed"\nstudy = "study.toml"\ncontroller = "rlgc:nets/v5.npz"\n'
         '[[rows]]\nname = "elsewhere"\nstudy = "study.toml"\n'
-        'controller = ["policy:runs/seed0", "uvls"]\narming_level = 0.85\n')
+        'controller = ["policy:runs/seed0", "uvls"]\narming_level = 0.85\narming_late = 3.0\n')
     spec = read_spec(spec_file)
     assert spec.out == tmp_path / "out"
     assert [r.name for r in spec.rows] == ["paper", "shaped", "fixed", "elsewhere"]
@@ -121,6 +121,7 @@ def test_ablation_file_rows_and_table(tmp_path):
     assert spec.rows[3].controllers == (f"policy:{tmp_path / 'runs' / 'seed0'}", "uvls")
     assert spec.rows[0].controllers == ()
     assert [r.arming_level for r in spec.rows] == [None, None, None, 0.85]
+    assert [r.arming_late for r in spec.rows] == [None, None, None, 3.0]
     paper, shaped = (choices(spec, row) for row in spec.rows[:2])
     assert (paper.seeds, paper.iterations, paper.shaping) == (2, 7, ())
     assert (shaped.iterations, shaped.shaping) == (9, (("c_normal", 30.0),))
@@ -170,7 +171,10 @@ def test_ablation_file_rows_and_table(tmp_path):
                            r"rows\[0\].controller = \[\]: .*non-empty list"),
                           ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
                            'rows = [{name = "a", study = "study.toml", arming_level = 2}]\n',
-                           r"rows\[0\].arming_level = 2: allowed 0 < p.u. < 2")):
+                           r"rows\[0\].arming_level = 2: allowed 0 < p.u. < 2"),
+                          ('out = "o"\nseeds = 1\niterations = 1\ntask_sets = ["t"]\n'
+                           'rows = [{name = "a", study = "study.toml", arming_late = 3.0}]\n',
+                           r"rows\[0\].arming_late = 3.0: needs an arming level")):
         spec_file.write_text(body)
         with pytest.raises(ValueError, match=message):
             read_spec(spec_file)

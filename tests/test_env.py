@@ -220,6 +220,22 @@ def test_the_mask_drops_requests_in_normal_operation_and_c_normal_charges_them(s
         action, _ = armed(None, None, None, ControlInputs(at, grid, EnvParams(), at.step))
         _, _, _, _, info = steps["none"](at, action, EnvParams(), grid)
         assert float(info["shed_pu"]) == pytest.approx(expected, rel=1e-6), lowest
+    # armed late (--arming-late) as well, never below 0.85 at an action bus: while a bus of
+    # the recovery check is below the recovery level that long after clearing (this state
+    # 0.22 s after it), not for a bus outside the check nor before that time
+    n_observed = len(study.env().observed)
+    low = state.history.at[-1, :n_observed].set(1.0).at[-1, 1].set(0.5)
+    for late, check, expected in ((0.2, True, shed_507), (0.3, True, 0.0), (0.2, False, 0.0)):
+        late_armed = masked(lambda params, obs, carry, inputs: (request, carry), "hadrec",
+                            study.env(), 0.85, late)
+        at = state.replace(history=low, recovery_check=state.recovery_check.at[1].set(check))
+        action, _ = late_armed(None, None, None, ControlInputs(at, grid, EnvParams(), at.step))
+        _, _, _, _, info = steps["none"](at, action, EnvParams(), grid)
+        assert float(info["shed_pu"]) == pytest.approx(expected, rel=1e-6), (late, check)
+    with pytest.raises(ValueError, match=r"--arming-late = 3.0: needs an arming level"):
+        masked(lambda *a: a, "hadrec", study.env(), None, 3.0)
+    with pytest.raises(ValueError, match=r"--arming-late = 0: allowed 0 < s < 60"):
+        masked(lambda *a: a, "hadrec", study.env(), 0.85, 0)
 
 
 def test_observations_every_obs_interval_end_with_the_agent_step_s_own(study, grid, tasks):

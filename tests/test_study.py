@@ -335,17 +335,27 @@ def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_pat
             "trained with --self-mask: it masks its own requests under its mask too")
         (folder / "policy.json").write_text(json.dumps({**info, "self_mask": True,
                                                         "arming_level": 0.85}))
-        monkeypatch.setattr(controllers, "masked", lambda apply, mask, env, level: (mask, level))
+        monkeypatch.setattr(controllers, "masked",
+                            lambda apply, mask, env, level, late: (mask, level, late))
         armed = load(f"policy:{folder}", UnderItsMask())
-        assert (armed.apply, armed.arming_level) == (("hadrec", 0.85), 0.85), (
+        assert (armed.apply, armed.arming_level) == (("hadrec", 0.85, None), 0.85), (
             "and with the arming level it was trained with")
         assert load(f"policy:{folder}", UnderItsMask(), arming_level=0.8).apply == (
-            "hadrec", 0.8), "or the one it is given where it runs"
+            "hadrec", 0.8, None), "or the one it is given where it runs"
+        (folder / "policy.json").write_text(json.dumps({**info, "self_mask": True,
+                                                        "arming_level": 0.85,
+                                                        "arming_late": 3.0}))
+        late = load(f"policy:{folder}", UnderItsMask())
+        assert (late.apply, late.arming_late) == (("hadrec", 0.85, 3.0), 3.0), (
+            "armed late as its policy.json says")
+        assert load(f"policy:{folder}", UnderItsMask(), arming_late=2.0).apply == (
+            "hadrec", 0.85, 2.0), "or as it is given where it runs"
         monkeypatch.undo()
         with pytest.raises(ValueError, match=r"--arming-level = 0: allowed 0 < p.u. < 2"):
             load(f"policy:{folder}", UnderItsMask(), arming_level=0)
         (folder / "policy.json").write_text(json.dumps(info))
-        monkeypatch.setattr(controllers, "masked", lambda apply, mask, env, level: (mask, level))
+        monkeypatch.setattr(controllers, "masked",
+                            lambda apply, mask, env, level, late: (mask, level))
         assert load(f"policy:{folder}", UnderItsMask(), arming_level=0.8).apply == (
             "hadrec", 0.8), "trained under the mask the study applies: armed all the same"
         monkeypatch.undo()
@@ -353,6 +363,9 @@ def test_policy_trained_under_another_action_mask_masks_its_own_requests(tmp_pat
         with pytest.raises(ValueError, match=r"--arming-level: policy:\S+ was trained without "
                                              r"an action mask, so it has no mask to arm"):
             load(f"policy:{folder}", UnderItsMask(), arming_level=0.8)
+        with pytest.raises(ValueError, match=r"--arming-late: policy:\S+ was trained without "
+                                             r"an action mask, so it has no mask to arm"):
+            load(f"policy:{folder}", UnderItsMask(), arming_late=3.0)
         (folder / "policy.json").write_text(json.dumps(info))
     # the latency benchmark (the reproduction's tab3) times it deciding from a faulted state
     from experiments.bench.controller_latency import bench_study

@@ -31,12 +31,13 @@ def task_specs(study: Study, tasks: str):
 
 def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
              plot_count: int = 3, own_mask: bool = True,
-             arming_level: float | None = None) -> dict:
+             arming_level: float | None = None, arming_late: float | None = None) -> dict:
     """The results dict of the module docstring (and figures in plot_dir). `tasks`: a task
     set name, a PNNL task JSON, or a list of TaskSpec. own_mask: a saved policy trained under
-    an action mask the study lacks masks its own requests; arming_level (p.u.): a saved
-    policy's own, in place of what it was trained with (`baselines.controllers.load`)."""
-    controller = load(control, study, own_mask, arming_level)
+    an action mask the study lacks masks its own requests; arming_level (p.u.) and
+    arming_late (s): a saved policy's own, in place of its policy.json's
+    (`baselines.controllers.load`)."""
+    controller = load(control, study, own_mask, arming_level, arming_late)
     env = controller.env
     log = training_log(control.removeprefix("rlgc:")) if control.startswith("rlgc:") else None
     for k, point in enumerate(study.points):
@@ -60,6 +61,8 @@ def evaluate(study: Study, control: str, tasks="test", plot_dir=None,
               **({"own_mask": controller.own_mask} if controller.own_mask else {}),
               **({"arming_level": controller.arming_level}
                  if controller.arming_level is not None else {}),
+              **({"arming_late": controller.arming_late}
+                 if controller.arming_late is not None else {}),
               "points": [p.label for p in study.points], "tasks": rows,
               "summary": {"n_tasks": len(rows),
                           "n_recovered": sum(r["recovered"] for r in rows),

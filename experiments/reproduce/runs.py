@@ -299,18 +299,20 @@ class Runs:
         return f"ppo:{folders[best] / 'policy'}"
 
     # --- evaluations -----------------------------------------------------------------------
-    def evaluation(self, control: str, tasks: str = "test",
-                   arming_level: float | None = None) -> dict:
+    def evaluation(self, control: str, tasks: str = "test", arming_level: float | None = None,
+                   arming_late: float | None = None) -> dict:
         """`experiments.evaluate` of `control` on a task set (a saved self-masked policy with
-        `arming_level`, p.u., if given), cached."""
+        `arming_level`, p.u., and `arming_late`, s, if given), cached."""
         from experiments.common.evaluation import evaluate
 
-        level = {} if arming_level is None else {"arming_level": arming_level}  # named as before
-        path = self.folder("eval", {**self._controller_inputs(control), "tasks": tasks, **level})
+        arming = {k: v for k, v in (("arming_level", arming_level), ("arming_late", arming_late))
+                  if v is not None}  # named as before when neither is given
+        path = self.folder("eval", {**self._controller_inputs(control), "tasks": tasks, **arming})
         path = path / "result.json"
         if path.is_file():
             return json.loads(path.read_text())
-        result = evaluate(self.study, self._spec(control), tasks, arming_level=arming_level)
+        result = evaluate(self.study, self._spec(control), tasks, arming_level=arming_level,
+                          arming_late=arming_late)
         path.write_text(json.dumps(result, indent=1))
         return result
 
