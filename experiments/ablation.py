@@ -55,7 +55,7 @@ import numpy as np
 
 from ars.checkpoint import metrics_rows
 from experiments.common.pars_command import parser as train_parser
-from experiments.common.scores import scores, targets_met
+from experiments.common.scores import LOSS_KINDS, scores, targets_met
 from experiments.common.training import Choices, shaping
 from experiments.reproduce.runs import FULL, Runs
 from jaxgrid.episode import check_arming_late, check_arming_level
@@ -242,7 +242,10 @@ def table(spec: Spec, results: dict) -> str:
              f"{spec.iterations} iterations", "",
              "Per task set: *need* = tasks no control fails, *ok* = tasks it recovers. "
              "wins: reward above UVLS's on need tasks; rec.: need tasks recovered (UVLS's in "
-             "brackets); sheds on: ok tasks with >= 1 MW shed; MW: shed per task of the kind. "
+             "brackets); sheds on: ok tasks with >= 1 MW shed; MW: shed per task of the kind; "
+             "lost: the need tasks not won, as ties / both recover / both fail / only UVLS "
+             "recovers / only it recovers (mean over seeds; blank for a row scored before "
+             "they were counted). "
              "Mean over seeds, range in brackets (a row of one seed: its one value); "
              "targets: seeds meeting all three "
              "(wins >= 95 %, rec. >= UVLS, sheds on <= 5 % of ok).", ""]
@@ -258,13 +261,13 @@ def table(spec: Spec, results: dict) -> str:
         uv = first["uvls"]
         lines += [f"## {heading}: {uv['n_tasks']} tasks, {uv['need']} need shedding "
                   f"(UVLS recovers {uv['uvls_recovered']}), {uv['ok']} need none", "",
-                  "| row | wins (% of need) | rec. | MW need | sheds on (% of ok) | MW ok | "
-                  "mean reward | targets | why |", "| --- " * 9 + "|"]
+                  "| row | wins (% of need) | rec. | MW need | lost | sheds on (% of ok) | MW ok | "
+                  "mean reward | targets | why |", "| --- " * 10 + "|"]
         for row in spec.rows:
             record = results.get(row.name)
             if not record or task_set not in record:
                 missing = "not scored (rerun with --no-train)" if record else "not trained"
-                lines.append(f"| {row.name} | {missing} | | | | | | | {row.why} |")
+                lines.append(f"| {row.name} | {missing} | | | | | | | | {row.why} |")
                 continue
             seeds = record[task_set]["seeds"]
             cell = lambda key, scale=1.0, fmt="{:.1f}": _cell(  # noqa: E731
@@ -274,7 +277,8 @@ def table(spec: Spec, results: dict) -> str:
             lines.append(
                 f"| {row.name} | {cell('wins', 100 / max(need, 1))} | "
                 f"{cell('recovered', fmt='{:.1f}')} ({seeds[0]['uvls_recovered']}) | "
-                f"{cell('mw_need', fmt='{:.0f}')} | {cell('sheds_on', 100 / max(ok, 1))} | "
+                f"{cell('mw_need', fmt='{:.0f}')} | {_lost(seeds)} | "
+                f"{cell('sheds_on', 100 / max(ok, 1))} | "
                 f"{cell('mw_ok', fmt='{:.0f}')} | {cell('mean_reward', fmt='{:.0f}')} | "
                 f"{met}/{len(seeds)} | {row.why} |")
         lines.append("")
@@ -290,6 +294,16 @@ def rows_of_spec(spec: Spec, results: dict, results_path: Path) -> dict:
         print(f"{results_path}: dropping the records of rows no longer in {spec.path}: "
               f"{', '.join(stale)}")
     return {name: record for name, record in results.items() if name not in stale}
+
+
+def _lost(seeds: list[dict]) -> str:
+    """The seeds' mean count of each kind of lost task (`scores.LOSS_KINDS`), or "" for
+    records scored before the kinds were counted."""
+    if any("losses" not in s for s in seeds):
+        return ""
+    fmt = "{:.0f}" if len(seeds) == 1 else "{:.1f}"
+    return " / ".join(fmt.format(np.mean([s["losses"][kind] for s in seeds]))
+                      for kind in LOSS_KINDS)
 
 
 def _cell(values: list[float], fmt: str) -> str:

@@ -6,7 +6,8 @@
 The first file is the reference that decides which tasks need shedding: those it does not
 recover. Prints, per controller, the summary (recovered, mean reward, MW shed), and for each
 later controller against each earlier one on the tasks that need shedding: on how many it
-earns the higher reward and how many it recovers. A result of a published network whose
+earns the higher reward, how many it recovers, and the others by what each recovered
+(`experiments.common.scores.losses`). A result of a published network whose
 training log has rewards for its tasks ("log_reward", `experiments.evaluate`) is also set
 against that log task by task: our reward, MW shed and verdict beside the logged reward
 ("against_log"), drawn with `--plot DIR` as DIR/<folder>_<file>_log.png. `--out` writes the
@@ -19,6 +20,8 @@ import json
 from pathlib import Path
 
 import numpy as np
+
+from experiments.common.scores import losses
 
 
 def _key(task: dict) -> tuple:
@@ -62,6 +65,7 @@ def compare(results: list[dict]) -> dict:
                 "higher_reward_on": wins,
                 "recovered": sum(later["tasks"][k]["recovered"] for k in need),
                 "against_recovered": sum(earlier["tasks"][k]["recovered"] for k in need),
+                "not_higher_on": losses(earlier["tasks"], later["tasks"], need),
                 "sheds_where_not_needed": sum(
                     later["tasks"][k]["shed_mw"] > 0 for k in reference["tasks"]
                     if k not in need)})
@@ -130,6 +134,10 @@ def main(argv=None) -> None:
               f"{pair['higher_reward_on']}/{report['need_shedding']}, recovers "
               f"{pair['recovered']} (vs {pair['against_recovered']}); sheds on "
               f"{pair['sheds_where_not_needed']} tasks that need none")
+        kinds = {k: n for k, n in pair["not_higher_on"].items() if n}
+        if kinds:
+            print("  not higher on: " + ", ".join(f"{n} {k.replace('_', ' ')}"
+                                                 for k, n in kinds.items()))
     for name, entry in report["against_log"].items():
         print(f"{name} against {entry['log']['path']} (iteration {entry['log']['iteration']}):")
         print(f"{'bus':>5} {'fault s':>8} {'reward':>9} {'log':>9} {'MW shed':>8}  recovered")

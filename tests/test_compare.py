@@ -31,6 +31,9 @@ def test_counts_wins_on_the_tasks_the_reference_does_not_recover(tmp_path):
     assert pair["against"] == "uvls"
     assert (pair["higher_reward_on"], pair["recovered"], pair["against_recovered"]) == (1, 2, 1)
     assert pair["sheds_where_not_needed"] == 1
+    # task 3: both recover, the policy sheds more (60 against 50 MW) and earns less
+    assert pair["not_higher_on"] == {"tie": 0, "both_recover": 1, "both_fail": 0,
+                                     "it_fails": 0, "it_recovers": 0}
 
 
 def test_refuses_results_on_other_tasks(tmp_path):
@@ -87,11 +90,27 @@ def test_scores_per_kind_of_task_by_hand():
                                    5: (-1000, 0, False)})
     record = scores(none, uvls, policy)
     assert record == {"n_tasks": 5, "need": 3, "wins": 2, "recovered": 2, "uvls_recovered": 1,
-                      "mw_need": 50.0, "ok": 2, "sheds_on": 1, "mw_ok": 15.25,
-                      "mean_reward": -270.2}
+                      "mw_need": 50.0, "losses": {"tie": 1, "both_recover": 0, "both_fail": 0,
+                                                  "it_fails": 0, "it_recovers": 0},
+                      "ok": 2, "sheds_on": 1, "mw_ok": 15.25, "mean_reward": -270.2}
     assert targets_met(record) == {"wins": False, "recovers": True, "quiet": False}
     with pytest.raises(ValueError, match="ran different tasks"):
         scores(none, uvls, _evaluated("other", {1: (0, 0, True)}))
+
+
+def test_losses_by_what_each_recovered():
+    """Each kind of a lost task once, by hand, and a win that is not counted."""
+    from experiments.common.scores import losses
+
+    task = lambda reward, ok: {"reward": reward, "recovered": ok}  # noqa: E731
+    other = {1: task(-100, False), 2: task(-100, True), 3: task(-900, False),
+             4: task(-100, True), 5: task(-11000, False), 6: task(-500, True)}
+    mine = {1: task(-100, False), 2: task(-200, True), 3: task(-950, False),
+            4: task(-10500, False), 5: task(-11200, True), 6: task(-300, True)}
+    assert losses(other, mine, mine.keys()) == {
+        "tie": 1, "both_recover": 1, "both_fail": 1, "it_fails": 1, "it_recovers": 1}
+    assert losses(other, mine, [6]) == dict.fromkeys(
+        ("tie", "both_recover", "both_fail", "it_fails", "it_recovers"), 0)
 
 
 def test_ablation_file_rows_and_table(tmp_path):
@@ -126,8 +145,11 @@ def test_ablation_file_rows_and_table(tmp_path):
     assert (paper.seeds, paper.iterations, paper.shaping) == (2, 7, ())
     assert (shaped.iterations, shaped.shaping) == (9, (("c_normal", 30.0),))
     record = {"n_tasks": 5, "need": 3, "wins": 3, "recovered": 2, "uvls_recovered": 1,
-              "mw_need": 50.0, "ok": 2, "sheds_on": 0, "mw_ok": 0.0, "mean_reward": -100.0}
-    worse = {**record, "wins": 1, "sheds_on": 1, "mean_reward": -300.0}
+              "mw_need": 50.0, "ok": 2, "sheds_on": 0, "mw_ok": 0.0, "mean_reward": -100.0,
+              "losses": {"tie": 0, "both_recover": 0, "both_fail": 0, "it_fails": 0,
+                         "it_recovers": 0}}
+    worse = {**record, "wins": 1, "sheds_on": 1, "mean_reward": -300.0,
+             "losses": {**record["losses"], "both_recover": 1, "it_fails": 1}}
     assert spec.subsets == (Subset("unseen", "test", (2, 3), "not trained on"),)
     text = table(spec, {"paper": {"test": {"uvls": record, "seeds": [record, worse]}}})
     assert "## test: 5 tasks, 3 need shedding (UVLS recovers 1), 2 need none" in text
@@ -147,7 +169,8 @@ def test_ablation_file_rows_and_table(tmp_path):
     assert [t["fault_bus"] for t in at_two["tasks"]] == [2]
     with pytest.raises(ValueError, match=r"none: no task at operating points \[5\]"):
         at_points(at_two, (5,))
-    assert "| paper | 66.7 [33.3, 100.0] | 2.0 [2.0, 2.0] (1) |" in text
+    assert ("| paper | 66.7 [33.3, 100.0] | 2.0 [2.0, 2.0] (1) | 50 [50, 50] | "
+            "0.0 / 0.5 / 0.0 / 0.5 / 0.0 |") in text
     assert "| 1/2 |" in text and "| shaped | not trained |" in text
     renamed = {"paper": {"folder": None}, "paper, seeds 0-1": {"folder": None}}
     assert list(rows_of_spec(spec, renamed, tmp_path / "ablation.json")) == ["paper"]
