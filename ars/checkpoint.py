@@ -97,9 +97,13 @@ def warm_start(state: TrainState, directory: str | Path, spec: PolicySpec) -> Tr
     (with a seed axis, every seed starts from it): a training that fine-tunes a trained policy
     under other settings. The statistics keep their weight (the observations the policy's run
     had seen), so the inputs stay scaled as the policy was trained; a feature its run saw as
-    constant (std 1 saved) is held at mean ± 1. ValueError if the saved spec is not `spec`."""
+    constant (std 1 saved) is held at mean ± 1. The output range may differ (a fine-tune
+    under another `ars.train.TrainConfig.max_request`: the network is kept, its outputs
+    scale to the new range); ValueError if the rest of the saved spec is not `spec`."""
     policy, (theta, mean, std), info = load_policy(directory)
-    if policy.spec != spec:
+    ranged = dataclasses.replace(policy.spec, action_low=spec.action_low,
+                                 action_high=spec.action_high)
+    if ranged != spec:
         raise ValueError(f"--init-policy {directory}: its policy is {policy.spec}, the "
                          f"training's is {spec} (same kind, sizes, widths and input options)")
     count = np.float32(observations_seen(Path(directory), info))

@@ -60,6 +60,10 @@ class TrainConfig:
       init_policy: a saved PARS policy folder to start from instead of θ = 0 and empty
         statistics (`ars.checkpoint.warm_start`: fine-tuning), or None (the paper's). A
         resumed run continues from its checkpoint.
+      max_request: the most the policy asks to shed per action and step, in the action's
+        units (a fraction of a bus's initial load): its output range becomes
+        [−max_request, action_high], inside the problem's range, which the environment still
+        applies to every controller; None: the problem's range (the paper's: 0.2).
     """
 
     policy: str = "lstm"
@@ -75,6 +79,7 @@ class TrainConfig:
     self_mask: bool = False
     arming_level: float | None = None
     init_policy: str | None = None
+    max_request: float | None = None
 
     def __post_init__(self):
         if self.iterations < 1 or self.checkpoint_every < 1 or (self.seeds or 1) < 1:
@@ -138,11 +143,23 @@ class Trainer(NamedTuple):
     spec: PolicySpec
 
 
+def policy_range(problem: Problem, max_request: float | None) -> tuple[float, float]:
+    """(low, high) of the policy's outputs: the problem's action range, or with
+    `max_request` [−max_request, high] (`TrainConfig.max_request`); ValueError outside it."""
+    low, high = float(problem.action_low), float(problem.action_high)
+    if max_request is None:
+        return low, high
+    if not -high < max_request <= -low:
+        raise ValueError(f"--max-request {max_request}: allowed in ({-high + 0.0:g}, "
+                         f"{-low:g}], the problem's action range")
+    return -float(max_request), high
+
+
 def make_trainer(problem: Problem, config: TrainConfig, mesh=None) -> Trainer:
     """The policy of `config` on the problem's sizes and its PARS iteration, the problem's
     episodes sharded over `mesh` (default: all devices)."""
     spec = PolicySpec(config.policy, problem.obs_size, problem.action_size, config.hidden,
-                      float(problem.action_low), float(problem.action_high), config.obs_clip,
+                      *policy_range(problem, config.max_request), config.obs_clip,
                       config.relative_inputs)
     policy, pars, mesh = Policy(spec), config.pars, mesh or default_mesh()
     evaluate = problem.evaluator(normalized_policy(policy, problem.network),

@@ -173,10 +173,15 @@ def test_a_training_starts_from_a_saved_policy_with_its_statistics(straight, tmp
             np.testing.assert_allclose(state.stats.replace(
                 count=state.stats.count[seed], m2=state.stats.m2[seed]).std, std, rtol=1e-6)
         np.testing.assert_array_equal(state.stats.mean, np.stack([mean, mean]))
-    out = tmp_path / "tuned"
-    assert run(TINY + ["--init-policy", str(source), "--iterations", "1", "--out", str(out)],
-               "train_39bus") == 0
-    assert json.loads((out / "policy" / "policy.json").read_text())["init_policy"] == str(source)
+    out = tmp_path / "tuned"  # under a smaller output range (--max-request): θ carries over
+    assert run(TINY + ["--init-policy", str(source), "--max-request", "0.1", "--iterations", "1",
+                       "--out", str(out)], "train_39bus") == 0
+    tuned = json.loads((out / "policy" / "policy.json").read_text())
+    assert tuned["init_policy"] == str(source)
+    assert (tuned["spec"]["action_low"], tuned["spec"]["action_high"]) == (-0.1, 0.0)
+    assert run(TINY + ["--max-request", "0.3", "--out", str(tmp_path / "wide")],
+               "train_39bus") == 2
+    assert "--max-request 0.3: allowed in (0, 0.2]" in capsys.readouterr().err
     assert run(TINY + ["--history", "2", "--init-policy", str(source), "--iterations", "1",
                        "--out", str(tmp_path / "other")], "train_39bus") == 2
     assert f"--init-policy {source}: its policy is PolicySpec(" in capsys.readouterr().err

@@ -61,6 +61,11 @@ def parser(command: str) -> argparse.ArgumentParser:
                         "(its kind, sizes and input options must be this training's; pass "
                         "--step-size and --noise where it left off, e.g. α·ε^iterations; "
                         "default: none, the paper's)")
+    p.add_argument("--max-request", type=float,
+                   help="the most the policy asks to shed per action bus and agent step, as a "
+                        "fraction of the bus's initial load (its outputs span [-MAX, 0]); the "
+                        "study's action range still binds every controller alike (default: "
+                        "that range, the paper's 0.2)")
     p.add_argument("--history", type=int,
                    help="observations stacked (default: the study's for the policy kind, "
                         "[training] history; the PNNL study files give 10 for linear and FNN, "

@@ -55,6 +55,8 @@ class Choices:
       obs_std_floor: the normaliser's smallest standard deviation, or None (none).
       init_policy: a saved PARS policy to start from, or None (θ = 0, the paper's;
         `ars.train.TrainConfig.init_policy`).
+      max_request: the most the policy asks per action and step, or None (the study's
+        action range, the paper's; `ars.train.TrainConfig.max_request`).
       history: observations stacked (None: the study's for the policy kind).
       directions: N.  top: b (None: N/2).  step_size: α.  noise: ν.  decay: ε.
       tasks_per_iteration: m (None: TASKS_PER_ITERATION, or the whole set if smaller).
@@ -75,6 +77,7 @@ class Choices:
     arming_level: float | None = TrainConfig.arming_level
     obs_std_floor: float | None = ParsConfig.obs_std_floor
     init_policy: str | None = TrainConfig.init_policy
+    max_request: float | None = TrainConfig.max_request
     history: int | None = None
     directions: int | None = None
     top: int | None = None
@@ -116,6 +119,7 @@ def train_config(study, choices: Choices = Choices()) -> TrainConfig:
     return TrainConfig(policy=choices.policy, hidden=tuple(hidden), obs_clip=choices.obs_clip,
                        relative_inputs=choices.relative_inputs, self_mask=choices.self_mask,
                        arming_level=choices.arming_level, init_policy=choices.init_policy,
+                       max_request=choices.max_request,
                        pars=pars, iterations=choices.iterations, seeds=choices.seeds,
                        checkpoint_every=choices.checkpoint_every, out=choices.out,
                        resume=choices.resume)

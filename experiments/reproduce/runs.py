@@ -171,7 +171,8 @@ class Runs:
             inputs["pars"].pop("obs_std_floor")
         if inputs["obs_clip"] is None:  # named as before it
             inputs.pop("obs_clip")
-        for flag in ("relative_inputs", "self_mask", "arming_level", "init_policy"):
+        for flag in ("relative_inputs", "self_mask", "arming_level", "init_policy",
+                     "max_request"):
             if inputs[flag] is False or inputs[flag] is None:  # named as before it
                 inputs.pop(flag)
         inputs["pars"]["task_batch"] = self.preset["task_batch"]  # the same on a GPU
