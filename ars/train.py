@@ -207,7 +207,9 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
                 **({"self_mask": True} if config.self_mask else {}),  # policy.json as before
                 **({"arming_level": config.arming_level} if config.arming_level is not None
                    else {}),
-                **({"init_policy": config.init_policy} if config.init_policy else {})}
+                **({"init_policy": config.init_policy} if config.init_policy else {}),
+                **({"max_request": config.max_request} if config.max_request is not None
+                   else {})}
     state, log = init_state(trainer.policy, config.pars, config.seeds), []
     if config.init_policy and not config.resume:
         state = checkpoint.warm_start(state, config.init_policy, trainer.spec)
@@ -221,7 +223,8 @@ def train(config: TrainConfig, problem: Problem, mesh=None) -> TrainResult:
                                      ("obs_clip", config.obs_clip, None),
                                      ("relative_inputs", config.relative_inputs, False),
                                      ("self_mask", config.self_mask, False),
-                                     ("arming_level", config.arming_level, None)):
+                                     ("arming_level", config.arming_level, None),
+                                     ("max_request", config.max_request, None)):
             if meta.get(flag, unsaved) != value:  # unsaved: a run from before the flag
                 raise ValueError(f"--resume: the run in {out} has --{flag.replace('_', '-')} "
                                  f"{meta.get(flag)}, not {value}")

@@ -138,6 +138,9 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
     assert run(TINY + ["--resume", "--relative-inputs", "--out", str(straight)],
                "train_39bus") == 2
     assert "has --relative-inputs False, not True" in capsys.readouterr().err
+    assert run(TINY + ["--resume", "--max-request", "0.1", "--out", str(straight)],
+               "train_39bus") == 2
+    assert "has --max-request None, not 0.1" in capsys.readouterr().err
     assert run(TINY + ["--self-mask", "--out", str(tmp_path)], "train_39bus") == 2
     assert ("--self-mask: study 'ieee39_fidvr' has no action mask ([env] action_mask)"
             in capsys.readouterr().err)
@@ -177,7 +180,7 @@ def test_a_training_starts_from_a_saved_policy_with_its_statistics(straight, tmp
     assert run(TINY + ["--init-policy", str(source), "--max-request", "0.1", "--iterations", "1",
                        "--out", str(out)], "train_39bus") == 0
     tuned = json.loads((out / "policy" / "policy.json").read_text())
-    assert tuned["init_policy"] == str(source)
+    assert (tuned["init_policy"], tuned["max_request"]) == (str(source), 0.1)
     assert (tuned["spec"]["action_low"], tuned["spec"]["action_high"]) == (-0.1, 0.0)
     assert run(TINY + ["--max-request", "0.3", "--out", str(tmp_path / "wide")],
                "train_39bus") == 2
