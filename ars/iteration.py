@@ -4,7 +4,8 @@ RobertTLange/evosax's `ask`/`tell`), jit-compiled:
     thetas  = strategy.ask(state, key)                        # (P, size) parameter vectors
     tasks   = m tasks drawn (the same for every θ)
     out     = evaluate(thetas, (mean, std), tasks, data)      # the problem: (P, m) episodes
-    returns = the mean over the tasks, non-finite ones replaced by the lowest finite one
+    returns = the mean over the tasks, non-finite ones replaced by the lowest finite one (or
+              the mean of each task's z-scores or centred ranks: `returns_of`)
     state   = strategy.tell(state, key, thetas, returns)
     then the observation statistics of every episode merged in (ARS V2's normaliser).
 
@@ -95,13 +96,48 @@ def clean_returns(returns):
     return jnp.where(finite, returns, floor)
 
 
+TASK_RETURNS = ("mean", "ranks", "zscores")
+
+
+def returns_of(rewards, how: str = "mean"):
+    """(P,) returns of the (P, m) episode rewards of P vectors on the same m tasks.
+
+    "mean": the mean over the tasks (the paper's), so a task weighs by its rewards' spread:
+    one whose episodes fail or recover by the perturbation (a spread of thousands) outweighs
+    one where they differ by the load shed (tens). "zscores": the mean over the tasks of each
+    task's rewards less their mean over the P, divided by their standard deviation (a task on
+    which all P are equal adds 0): every task's spread weighs alike, and within a task a
+    failure still costs what it costs against the others. "ranks": the mean over the tasks
+    of each task's centred ranks in [−0.5, 0.5] among the P (the fitness shaping of Salimans
+    et al. 2017, per task), equal rewards sharing their mean rank: every task weighs alike
+    and only the order counts. Non-finite rewards count as the lowest finite one (ranks: rank
+    lowest). ValueError for another `how`.
+    """
+    if how == "mean":
+        return clean_returns(rewards.mean(axis=1))
+    if how == "zscores":
+        rewards = clean_returns(rewards)
+        spread = rewards.std(axis=0)
+        scaled = (rewards - rewards.mean(axis=0)) / jnp.where(spread > 0, spread, 1.0)
+        return scaled.mean(axis=1)
+    if how != "ranks":
+        raise ValueError(f"task_returns = {how!r}: allowed {', '.join(TASK_RETURNS)}")
+    rewards = jnp.where(jnp.isfinite(rewards), rewards, -jnp.inf)
+    below = (rewards[None, :, :] < rewards[:, None, :]).sum(1)  # (P, m): how many below
+    equal = (rewards[None, :, :] == rewards[:, None, :]).sum(1)  # itself included
+    population = rewards.shape[0]
+    ranks = (below + 0.5 * (equal - 1)) / max(population - 1, 1) - 0.5
+    return ranks.mean(axis=1)
+
+
 def default_mesh() -> Mesh:
     """A 1-D mesh (axis "batch") over every device."""
     return Mesh(np.array(jax.devices()), ("batch",))
 
 
 def make_iteration(strategy: Strategy, evaluate: Callable, tasks_per_iteration: int,
-                   sample=None, mesh: Mesh | None = None, seeds: int | None = None):
+                   sample=None, mesh: Mesh | None = None, seeds: int | None = None,
+                   task_returns: str = "mean"):
     """`iteration(state, tasks, data) -> (state, metrics)`, jit-compiled (`iteration.compiled`).
 
     evaluate(thetas (P, size), (mean, std), tasks (m, ...), data) -> dict of (P, m, ...)
@@ -111,9 +147,10 @@ def make_iteration(strategy: Strategy, evaluate: Callable, tasks_per_iteration: 
     uniformly). State and metrics are replicated over `mesh` (default all devices). With
     `seeds`, the state (from `initial_state(..., seeds=...)`) and the metrics have a leading seed
     axis: independent trainings of one configuration vmapped into one program, sharing the
-    tasks and data. Metrics: reward_mean, reward_max (over the P returns), rollouts (P·m)
-    and, where the episodes report steps, env_steps. ValueError if the P vectors do not
-    split over the mesh's devices (the problem's evaluate splits them).
+    tasks and data. The strategy is told `returns_of(rewards, task_returns)`.
+    Metrics: reward_mean, reward_max (over the P mean rewards), rollouts (P·m) and, where
+    the episodes report steps, env_steps. ValueError if the P vectors do not split over the
+    mesh's devices (the problem's evaluate splits them).
     """
     m = tasks_per_iteration
     mesh = mesh or default_mesh()
@@ -129,8 +166,8 @@ def make_iteration(strategy: Strategy, evaluate: Callable, tasks_per_iteration: 
                   else jax.random.choice(k_task, n_tasks, (m,), replace=False))
         picked = jax.tree.map(lambda a: a[chosen], tasks)
         out = evaluate(thetas, (state.stats.mean, state.stats.std), picked, data)
-        returns = clean_returns(out["reward"].mean(axis=1))
-        new = strategy.tell(state, k_ask, thetas, returns)
+        returns = returns_of(out["reward"])
+        new = strategy.tell(state, k_ask, thetas, returns_of(out["reward"], task_returns))
         _, (count, total, total_sq) = out["policy_carry"]
         stats = normalizer.merge(state.stats, count.sum(), total.sum((0, 1)),
                                  total_sq.sum((0, 1)))

@@ -19,7 +19,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from ars.iteration import TrainState, initial_state
+from ars.iteration import TASK_RETURNS, TrainState, initial_state
 from ars.policies import Policy
 
 
@@ -47,6 +47,10 @@ class ParsConfig:
       compact_chunks: see `compact_after`.
       obs_std_floor: the normaliser's smallest standard deviation of a varying input, in the
         input's units (`ars.normalizer.RunningStats.floor`; None: none, as the paper).
+      task_returns: how a vector's m episode rewards become the return the top-b selection
+        and the step read (`ars.iteration.returns_of`): "mean" (the paper's), or the mean
+        of each task's "zscores" or centred "ranks" (every task weighs alike; not the
+        paper's).
       seed: PRNG seed.
     """
 
@@ -60,6 +64,7 @@ class ParsConfig:
     compact_after: int | None = None
     compact_chunks: int = 4
     obs_std_floor: float | None = None
+    task_returns: str = "mean"
     seed: int = 0
 
     def __post_init__(self):
@@ -78,6 +83,7 @@ class ParsConfig:
             "compact_chunks": (self.compact_chunks >= 1, ">= 1"),
             "obs_std_floor": (self.obs_std_floor is None or self.obs_std_floor > 0,
                               "None or > 0"),
+            "task_returns": (self.task_returns in TASK_RETURNS, ", ".join(TASK_RETURNS)),
         }
         for name, (ok, allowed) in checks.items():
             if not ok:

@@ -171,7 +171,7 @@ def make_trainer(problem: Problem, config: TrainConfig, mesh=None) -> Trainer:
     sample = (problem.sampler(pars.tasks_per_iteration)
               if problem.sampler is not None else None)
     iteration = make_iteration(Pars(pars), evaluate, pars.tasks_per_iteration, sample, mesh,
-                               config.seeds)
+                               config.seeds, pars.task_returns)
     return Trainer(iteration, policy, spec)
 
 

@@ -4,6 +4,8 @@ them (`ars.pars.Pars` composed with the episodes' batching and sharding,
 `jaxgrid.population.evaluator`); a second strategy (plain ES) through the same iteration."""
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,7 +15,7 @@ from jax.sharding import Mesh
 import ars.iteration
 from ars import normalizer
 from ars.es import PlainEs
-from ars.iteration import clean_returns, default_mesh
+from ars.iteration import clean_returns, default_mesh, returns_of
 from ars.normalizer import RunningStats, initial_carry, normalized_policy
 from ars.pars import Pars, ParsConfig, ars_update, init_state
 from ars.policies import Policy, PolicySpec
@@ -74,7 +76,8 @@ def make_iteration(episode, policy, config, sample=None, mesh=None, seeds=None,
     evaluate = evaluator(episode, normalized_policy(policy), initial_carry(policy), mesh,
                          config.task_batch, config.compact_after, config.compact_chunks)
     return ars.iteration.make_iteration(strategy or Pars(config), evaluate,
-                                        config.tasks_per_iteration, sample, mesh, seeds)
+                                        config.tasks_per_iteration, sample, mesh, seeds,
+                                        config.task_returns)
 
 
 def test_update_equals_the_hand_computed_one():
@@ -99,6 +102,35 @@ def test_zero_spread_and_non_finite_returns_are_guarded():
     assert np.asarray(cleaned).tolist() == [-5.0, -5.0, -5.0, 3.0, -5.0]
     _, best = ars_update(theta, delta, cleaned[:2], cleaned[2:4], top=1, step_size=1.0)
     assert int(best[0]) == 1, "a non-finite return must never rank first"
+
+
+def test_task_ranks_and_zscores_weigh_every_task_alike():
+    """Centred ranks per task (columns), ties sharing their mean rank, then averaged: a task
+    whose rewards differ by thousands counts as much as one that differs by units, a task on
+    which all are equal adds nothing, and a non-finite reward ranks lowest; z-scores per task
+    likewise, by hand."""
+    rewards = jnp.array([[-10_000.0, -51.0, -7.0],
+                         [-100.0, -50.0, -7.0],
+                         [-100.0, -52.0, -7.0],
+                         [jnp.nan, -49.0, -7.0]])
+    # task 0: nan lowest (0), -10 000 next (1), the two -100 share ranks 2 and 3 (2.5)
+    # task 1: -52 < -51 < -50 < -49 (0, 1, 2, 3); task 2: all equal (1.5 each)
+    ranks = np.array([[1, 1, 1.5], [2.5, 2, 1.5], [2.5, 0, 1.5], [0, 3, 1.5]]) / 3 - 0.5
+    np.testing.assert_allclose(np.asarray(returns_of(rewards, "ranks")), ranks.mean(1),
+                               rtol=1e-6)
+    mean = np.asarray(returns_of(rewards[:3]))
+    np.testing.assert_allclose(mean, [-3352.6667, -52.3333, -53.0], rtol=1e-6)
+    assert np.argmax(mean) == 1 and np.argmax(returns_of(rewards[:3], "ranks")) == 1
+    # z-scores of the first three: task 0 (-10 000, -100, -100) has mean -3 400, std
+    # 4 666.9; task 1 (-51, -50, -52) mean -51, std 0.8165; task 2 adds 0
+    spread = np.array([np.std([-10_000.0, -100, -100]), np.std([-51.0, -50, -52])])
+    z = np.array([[-6600 / spread[0], 0], [3300 / spread[0], 1 / spread[1]],
+                  [3300 / spread[0], -1 / spread[1]]])
+    np.testing.assert_allclose(np.asarray(returns_of(rewards[:3], "zscores")), z.sum(1) / 3,
+                               rtol=1e-5)
+    with pytest.raises(ValueError, match="task_returns = 'median': allowed mean, ranks, "
+                                         "zscores"):
+        returns_of(rewards, "median")
 
 
 def test_normaliser_merge_equals_the_pooled_statistics():
@@ -228,6 +260,11 @@ def test_ars_improves_a_quadratic_objective(quadratic):
     assert int(state.iteration) == 60
     assert float(state.step_size) == pytest.approx(0.2 * 0.995 ** 60, rel=1e-5)
     assert float(state.stats.count) == 60 * 2 * 8 * 2, "every rollout's observation merged"
+    for how in ("ranks", "zscores"):
+        shaped, history, _ = _train(policy, dataclasses.replace(config, task_returns=how), 60)
+        print(f"with task {how}: {_objective(policy, shaped):.3f}")
+        assert _objective(policy, shaped) > 0.2 * start, f"{how} should remove most too"
+        assert history[-1]["reward_mean"] < 0, "metrics stay in reward units"
 
 
 def test_same_seed_same_theta_and_device_counts_agree(quadratic):
@@ -244,8 +281,6 @@ def test_same_seed_same_theta_and_device_counts_agree(quadratic):
 def test_seeds_in_one_program_equal_the_runs_one_by_one(quadratic):
     """3 seeds vmapped into one compiled iteration (a leading seed axis on the state) end
     where 3 separate runs of seeds 3, 4, 5 end, to float32 summation-order tolerance."""
-    import dataclasses
-
     policy, config = quadratic
     iteration = make_iteration(quadratic_episode, policy, config, seeds=3)
     state = init_state(policy, config, seeds=3)
@@ -266,8 +301,6 @@ def test_tasks_in_batches_equal_all_tasks_at_once(quadratic):
     float32 rounding. (Not bitwise: the batch is every array's minor axis (`vmap_minor`),
     so batches of 1 and of m compile to differently vectorised loops, which may round
     differently; five iterations of θ = O(1) stay within 1e-5.)"""
-    import dataclasses
-
     policy, config = quadratic
     together, _, _ = _train(policy, config, 5)
     batched, _, _ = _train(policy, dataclasses.replace(config, task_batch=1), 5)
@@ -281,8 +314,6 @@ def test_regrouped_episodes_equal_whole_ones(quadratic, task_batch, chunks):
     chunks (3: ⌈16/3⌉ = 6 lanes, the last chunk padded; 1: all lanes) or, with one task per
     batch, sharing their task: the same θ and the same steps as whole episodes, to float32
     rounding (the chunks are batches of other sizes). Episodes end at 1 to 6 steps."""
-    import dataclasses
-
     policy, config = quadratic
     config = dataclasses.replace(config, task_batch=task_batch, noise=0.3)
     whole, whole_log, _ = _train(policy, config, 4, episode=ShortfallEpisode())
@@ -299,8 +330,6 @@ def test_regrouped_episodes_equal_whole_ones(quadratic, task_batch, chunks):
 def test_regrouped_episodes_under_the_seed_vmap(quadratic):
     """With seeds vmapped into one program, each seed's chunk count differs (the chunk loop
     runs the largest, the others' extra chunks change nothing): θ as whole episodes."""
-    import dataclasses
-
     policy, config = quadratic
     config = dataclasses.replace(config, noise=0.3)
     thetas = []
@@ -320,6 +349,9 @@ def test_bad_hyper_parameters_are_named(quadratic):
         ParsConfig(directions=8, top=9)
     with pytest.raises(ValueError, match="decay = 1.5"):
         ParsConfig(decay=1.5)
+    with pytest.raises(ValueError, match="task_returns = 'median': allowed mean, ranks, "
+                                         "zscores"):
+        ParsConfig(task_returns="median")
     with pytest.raises(ValueError, match="compact_after = 0: allowed None or >= 1"):
         ParsConfig(compact_after=0)
     with pytest.raises(ValueError, match=r"compact_after = 2: the episode must run in two "

@@ -157,8 +157,9 @@ def test_saved_policy_evaluates_and_runs_refuse_the_wrong_folder(straight, tmp_p
 def test_a_training_starts_from_a_saved_policy_with_its_statistics(straight, tmp_path, capsys):
     """--init-policy: the state starts at the saved θ and statistics, weighted by the
     observations its run had seen (policy.npz's count, or for a policy saved without one,
-    its run's env_steps at that iteration), on every seed; the run records where it started,
-    and a policy of another shape is refused by name."""
+    its run's env_steps at that iteration), on every seed; the run records where it started
+    (a fine-tune also its --max-request and --task-returns), and a policy of another shape
+    is refused by name."""
     source = straight / "policies" / "00006"
     policy, (theta, mean, std), info = checkpoint.load_policy(source)
     steps = [json.loads(line)["env_steps"] for line in _lines(straight / "metrics.jsonl")]
@@ -178,9 +179,10 @@ def test_a_training_starts_from_a_saved_policy_with_its_statistics(straight, tmp
         np.testing.assert_array_equal(state.stats.mean, np.stack([mean, mean]))
     out = tmp_path / "tuned"  # under a smaller output range (--max-request): θ carries over
     assert run(TINY + ["--init-policy", str(source), "--max-request", "0.1", "--iterations", "1",
-                       "--out", str(out)], "train_39bus") == 0
+                       "--task-returns", "ranks", "--out", str(out)], "train_39bus") == 0
     tuned = json.loads((out / "policy" / "policy.json").read_text())
     assert (tuned["init_policy"], tuned["max_request"]) == (str(source), 0.1)
+    assert tuned["config"]["task_returns"] == "ranks"
     assert (tuned["spec"]["action_low"], tuned["spec"]["action_high"]) == (-0.1, 0.0)
     assert run(TINY + ["--max-request", "0.3", "--out", str(tmp_path / "wide")],
                "train_39bus") == 2

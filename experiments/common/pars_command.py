@@ -10,6 +10,7 @@ from pathlib import Path
 
 import jax
 
+from ars.iteration import TASK_RETURNS
 from ars.policies import KINDS
 from experiments.common.studyargs import add_study_arguments, study_from_args
 from experiments.common.training import (COMMANDS, PAPER_PRESETS, TASKS_PER_ITERATION, Choices,
@@ -55,6 +56,12 @@ def parser(command: str) -> argparse.ArgumentParser:
                         "varying input, in its units (p.u. for voltages; default: none, as "
                         "the paper): an input that hardly moves in training is scaled by at "
                         "most 1/FLOOR")
+    p.add_argument("--task-returns", choices=TASK_RETURNS, default=Choices.task_returns,
+                   help="a perturbed policy's return: the mean of its m tasks' rewards (the "
+                        "paper's), or the mean over the tasks of its rewards' z-scores "
+                        "(zscores) or centred ranks (ranks) among the 2N on each task, so "
+                        "that a task whose episodes fail or recover by the perturbation "
+                        "weighs no more than one where they differ by the load shed")
     p.add_argument("--init-policy", metavar="DIR",
                    help="start from this saved PARS policy (its θ and observation statistics) "
                         "instead of θ = 0: fine-tuning a trained policy under other settings "

@@ -53,6 +53,8 @@ class Choices:
       arming_level: p.u., with self_mask: the policy armed only once an action bus falls
         below it, or None (`ars.train.TrainConfig.arming_level`).
       obs_std_floor: the normaliser's smallest standard deviation, or None (none).
+      task_returns: "mean" (the paper's), "zscores" or "ranks"
+        (`ars.pars.ParsConfig.task_returns`).
       init_policy: a saved PARS policy to start from, or None (θ = 0, the paper's;
         `ars.train.TrainConfig.init_policy`).
       max_request: the most the policy asks per action and step, or None (the study's
@@ -76,6 +78,7 @@ class Choices:
     self_mask: bool = TrainConfig.self_mask
     arming_level: float | None = TrainConfig.arming_level
     obs_std_floor: float | None = ParsConfig.obs_std_floor
+    task_returns: str = ParsConfig.task_returns
     init_policy: str | None = TrainConfig.init_policy
     max_request: float | None = TrainConfig.max_request
     history: int | None = None
@@ -113,7 +116,8 @@ def train_config(study, choices: Choices = Choices()) -> TrainConfig:
                       compact_after=compact_after(choices.compact_after, study,
                                                   choices.task_set, choices.episode),
                       compact_chunks=choices.compact_chunks,
-                      obs_std_floor=choices.obs_std_floor, seed=choices.seed)
+                      obs_std_floor=choices.obs_std_floor,
+                      task_returns=choices.task_returns, seed=choices.seed)
     hidden = choices.hidden if choices.hidden is not None else (
         () if choices.policy == "linear" else preset["hidden"])
     return TrainConfig(policy=choices.policy, hidden=tuple(hidden), obs_clip=choices.obs_clip,

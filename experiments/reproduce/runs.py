@@ -169,6 +169,8 @@ class Runs:
             inputs["pars"].pop(speed_only)
         if inputs["pars"]["obs_std_floor"] is None:  # named as before it
             inputs["pars"].pop("obs_std_floor")
+        if inputs["pars"]["task_returns"] == "mean":  # the paper's: named as before it
+            inputs["pars"].pop("task_returns")
         if inputs["obs_clip"] is None:  # named as before it
             inputs.pop("obs_clip")
         for flag in ("relative_inputs", "self_mask", "arming_level", "init_policy",
