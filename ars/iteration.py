@@ -96,7 +96,16 @@ def clean_returns(returns):
     return jnp.where(finite, returns, floor)
 
 
-TASK_RETURNS = ("mean", "ranks", "zscores")
+TASK_RETURNS = ("mean", "ranks", "ranks+mean", "zscores")
+
+
+def centred_ranks(values):
+    """(P, k) ranks of each column's P values in [−0.5, 0.5], equal values sharing their mean
+    rank; non-finite values rank lowest."""
+    values = jnp.where(jnp.isfinite(values), values, -jnp.inf)
+    below = (values[None, :, :] < values[:, None, :]).sum(1)  # (P, k): how many below
+    equal = (values[None, :, :] == values[:, None, :]).sum(1)  # itself included
+    return (below + 0.5 * (equal - 1)) / max(values.shape[0] - 1, 1) - 0.5
 
 
 def returns_of(rewards, how: str = "mean"):
@@ -110,8 +119,11 @@ def returns_of(rewards, how: str = "mean"):
     failure still costs what it costs against the others. "ranks": the mean over the tasks
     of each task's centred ranks in [−0.5, 0.5] among the P (the fitness shaping of Salimans
     et al. 2017, per task), equal rewards sharing their mean rank: every task weighs alike
-    and only the order counts. Non-finite rewards count as the lowest finite one (ranks: rank
-    lowest). ValueError for another `how`.
+    and only the order counts. "ranks+mean": "ranks" plus the centred rank of the mean
+    reward among the P, so that the order by the paper's return (where one failed task
+    outweighs less shedding on several) weighs as much as every task's order together.
+    Non-finite rewards count as the lowest finite one (ranks: rank lowest). ValueError for
+    another `how`.
     """
     if how == "mean":
         return clean_returns(rewards.mean(axis=1))
@@ -120,14 +132,12 @@ def returns_of(rewards, how: str = "mean"):
         spread = rewards.std(axis=0)
         scaled = (rewards - rewards.mean(axis=0)) / jnp.where(spread > 0, spread, 1.0)
         return scaled.mean(axis=1)
-    if how != "ranks":
+    if how not in ("ranks", "ranks+mean"):
         raise ValueError(f"task_returns = {how!r}: allowed {', '.join(TASK_RETURNS)}")
-    rewards = jnp.where(jnp.isfinite(rewards), rewards, -jnp.inf)
-    below = (rewards[None, :, :] < rewards[:, None, :]).sum(1)  # (P, m): how many below
-    equal = (rewards[None, :, :] == rewards[:, None, :]).sum(1)  # itself included
-    population = rewards.shape[0]
-    ranks = (below + 0.5 * (equal - 1)) / max(population - 1, 1) - 0.5
-    return ranks.mean(axis=1)
+    per_task = centred_ranks(rewards).mean(axis=1)
+    if how == "ranks":
+        return per_task
+    return per_task + centred_ranks(rewards.mean(axis=1, keepdims=True))[:, 0]
 
 
 def default_mesh() -> Mesh:

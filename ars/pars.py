@@ -50,7 +50,7 @@ class ParsConfig:
       task_returns: how a vector's m episode rewards become the return the top-b selection
         and the step read (`ars.iteration.returns_of`): "mean" (the paper's), or the mean
         of each task's "zscores" or centred "ranks" (every task weighs alike; not the
-        paper's).
+        paper's), or "ranks+mean" (those ranks plus the centred rank of the mean reward).
       seed: PRNG seed.
     """
 

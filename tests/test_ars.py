@@ -118,6 +118,9 @@ def test_task_ranks_and_zscores_weigh_every_task_alike():
     ranks = np.array([[1, 1, 1.5], [2.5, 2, 1.5], [2.5, 0, 1.5], [0, 3, 1.5]]) / 3 - 0.5
     np.testing.assert_allclose(np.asarray(returns_of(rewards, "ranks")), ranks.mean(1),
                                rtol=1e-6)
+    # ranks+mean adds the centred rank of each row's mean: -3 352.7, -52.3, -53, nan
+    np.testing.assert_allclose(np.asarray(returns_of(rewards, "ranks+mean")),
+                               ranks.mean(1) + np.array([1, 3, 2, 0]) / 3 - 0.5, rtol=1e-6)
     mean = np.asarray(returns_of(rewards[:3]))
     np.testing.assert_allclose(mean, [-3352.6667, -52.3333, -53.0], rtol=1e-6)
     assert np.argmax(mean) == 1 and np.argmax(returns_of(rewards[:3], "ranks")) == 1
@@ -129,7 +132,7 @@ def test_task_ranks_and_zscores_weigh_every_task_alike():
     np.testing.assert_allclose(np.asarray(returns_of(rewards[:3], "zscores")), z.sum(1) / 3,
                                rtol=1e-5)
     with pytest.raises(ValueError, match="task_returns = 'median': allowed mean, ranks, "
-                                         "zscores"):
+                                         r"ranks\+mean, zscores"):
         returns_of(rewards, "median")
 
 
@@ -260,7 +263,7 @@ def test_ars_improves_a_quadratic_objective(quadratic):
     assert int(state.iteration) == 60
     assert float(state.step_size) == pytest.approx(0.2 * 0.995 ** 60, rel=1e-5)
     assert float(state.stats.count) == 60 * 2 * 8 * 2, "every rollout's observation merged"
-    for how in ("ranks", "zscores"):
+    for how in ("ranks", "ranks+mean", "zscores"):
         shaped, history, _ = _train(policy, dataclasses.replace(config, task_returns=how), 60)
         print(f"with task {how}: {_objective(policy, shaped):.3f}")
         assert _objective(policy, shaped) > 0.2 * start, f"{how} should remove most too"
@@ -350,7 +353,7 @@ def test_bad_hyper_parameters_are_named(quadratic):
     with pytest.raises(ValueError, match="decay = 1.5"):
         ParsConfig(decay=1.5)
     with pytest.raises(ValueError, match="task_returns = 'median': allowed mean, ranks, "
-                                         "zscores"):
+                                         r"ranks\+mean, zscores"):
         ParsConfig(task_returns="median")
     with pytest.raises(ValueError, match="compact_after = 0: allowed None or >= 1"):
         ParsConfig(compact_after=0)

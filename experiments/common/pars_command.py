@@ -61,7 +61,8 @@ def parser(command: str) -> argparse.ArgumentParser:
                         "paper's), or the mean over the tasks of its rewards' z-scores "
                         "(zscores) or centred ranks (ranks) among the 2N on each task, so "
                         "that a task whose episodes fail or recover by the perturbation "
-                        "weighs no more than one where they differ by the load shed")
+                        "weighs no more than one where they differ by the load shed; "
+                        "ranks+mean adds the centred rank of the mean reward")
     p.add_argument("--init-policy", metavar="DIR",
                    help="start from this saved PARS policy (its θ and observation statistics) "
                         "instead of θ = 0: fine-tuning a trained policy under other settings "

@@ -53,7 +53,7 @@ class Choices:
       arming_level: p.u., with self_mask: the policy armed only once an action bus falls
         below it, or None (`ars.train.TrainConfig.arming_level`).
       obs_std_floor: the normaliser's smallest standard deviation, or None (none).
-      task_returns: "mean" (the paper's), "zscores" or "ranks"
+      task_returns: "mean" (the paper's), "zscores", "ranks" or "ranks+mean"
         (`ars.pars.ParsConfig.task_returns`).
       init_policy: a saved PARS policy to start from, or None (θ = 0, the paper's;
         `ars.train.TrainConfig.init_policy`).
