@@ -19,7 +19,8 @@ import pytest
 
 from experiments.reproduce import claims
 from experiments.reproduce.figures import EXPERIMENTS, PAPER
-from experiments.reproduce.runs import QUICK, Runs, convergence_iteration, study_key
+from experiments.reproduce.runs import (QUICK, Runs, _hash, convergence_iteration, study_key,
+                                        study_keys)
 from experiments.reproduce.harness import _ppo_flags, main, run, write_report
 
 # The built-in 39-bus study at two load levels: trained and tested at the first, the second
@@ -392,6 +393,32 @@ def test_a_run_folder_name_does_not_depend_on_where_the_files_lie(tmp_path):
     here = key(tmp_path / "a", "network")
     assert key(tmp_path / "b", "network") == here
     assert key(tmp_path / "c", "network, changed") != here
+
+
+def test_runs_made_before_a_setting_was_written_at_its_default_keep_their_folders(study_file,
+                                                                                 tmp_path):
+    """A study's resolved TOML gained `shed_limit = 1.0` (its default, no limit) after runs
+    were named by the text without it: such a training is found by that earlier key while
+    the key's own folder holds no run, a training under the key itself is preferred, and an
+    evaluation is named by the key alone."""
+    plain = SimpleNamespace(definition=SimpleNamespace(grid=SimpleNamespace(
+        raw=(), dyr=None, task_config=None, sim_config=None)))
+    written, before = "[env]\nshed_limit = 1.0\nx = 2\n", "[env]\nx = 2\n"
+    assert study_keys(plain, written) == (study_key(plain, written), study_key(plain, before))
+    limited = "[env]\nshed_limit = 0.6\n"
+    assert study_keys(plain, limited) == (study_key(plain, limited),)
+
+    runs = Runs(str(study_file), tmp_path, QUICK)
+    assert "shed_limit = 1.0\n" in runs.study_file.read_text()
+    inputs = {"config": {"seed": 0}}
+    earlier = tmp_path / "runs" / f"pars-{_hash([runs.earlier_keys[0], inputs])}"
+    earlier.mkdir(parents=True)
+    (earlier / "metrics.jsonl").write_text("")
+    assert runs.folder("pars", inputs, training=True) == earlier
+    now = tmp_path / "runs" / f"pars-{_hash([runs.study_key, inputs])}"
+    assert runs.folder("pars", inputs) == now
+    (now / "metrics.jsonl").write_text("")
+    assert runs.folder("pars", inputs, training=True) == now
 
 
 def test_a_gpu_trains_every_task_in_one_batch_in_the_cpu_runs_folder(study_file, tmp_path,

@@ -107,6 +107,27 @@ def _hash(value) -> str:
     return hashlib.sha1(json.dumps(value, sort_keys=True).encode()).hexdigest()[:10]
 
 
+# Lines that every resolved study TOML gained with a new setting at its default (the study
+# unchanged): runs made before a line came keep the names that the text without it gives.
+ADDED_AT_DEFAULT = ("shed_limit = 1.0\n",)  # [env] shed_limit (078c57a), 1.0: no limit
+
+
+def study_keys(study: Study, text: str) -> tuple[str, ...]:
+    """The study's key (`study_key`), then the keys it had before the `ADDED_AT_DEFAULT`
+    lines of `text` were written."""
+    keys = [study_key(study, text)]
+    for line in ADDED_AT_DEFAULT:
+        if line in text:
+            text = text.replace(line, "", 1)
+            keys.append(study_key(study, text))
+    return tuple(keys)
+
+
+def _holds_a_run(folder: Path) -> bool:
+    """Whether a run folder holds more than its inputs.json."""
+    return folder.is_dir() and any(f.name != "inputs.json" for f in folder.iterdir())
+
+
 def study_key(study: Study, text: str) -> str:
     """Hash of a study's resolved TOML `text` with each input file's absolute path replaced by
     a hash of the file's content, so that a run folder's name (and a committed checkpoint)
@@ -128,15 +149,20 @@ class Runs:
         self.out.mkdir(parents=True, exist_ok=True)
         self.study_file = self.out / "study.toml"
         write_study(self.study, self.study_file)
-        self.study_key = study_key(self.study, self.study_file.read_text())
+        self.study_key, *self.earlier_keys = study_keys(self.study, self.study_file.read_text())
         self.preset = paper_preset(self.study)
         self.directions = settings.directions or self.preset["directions"]
         self.trainings: set[Path] = set()  # PARS / PPO run folders used since last cleared
         self.main_policy_evaluated = False  # an experiment here evaluated the trained one
 
-    def folder(self, kind: str, inputs: dict) -> Path:
-        """OUT/runs/KIND-HASH for `inputs` (with the study), and its inputs.json."""
-        folder = self.out / "runs" / f"{kind}-{_hash([self.study_key, inputs])}"
+    def folder(self, kind: str, inputs: dict, training: bool = False) -> Path:
+        """OUT/runs/KIND-HASH for `inputs` (with the study), and its inputs.json. A `training`
+        is found by an earlier key of the study too (`study_keys`) where the key's own folder
+        holds none; evaluations are named by the key alone, so they are made with today's
+        code beside UVLS's."""
+        keys = (self.study_key, *self.earlier_keys) if training else (self.study_key,)
+        named = [self.out / "runs" / f"{kind}-{_hash([key, inputs])}" for key in keys]
+        folder = next((f for f in named if _holds_a_run(f)), named[0])
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "inputs.json").write_text(json.dumps(inputs, indent=1))
         return folder
@@ -184,7 +210,7 @@ class Runs:
             named["task_set"] = choices.task_set
         if choices.shaping:
             named["shaping"] = dict(choices.shaping)
-        return self.folder(kind, named)
+        return self.folder(kind, named, training=True)
 
     def pars_finished(self, folder: Path) -> bool:
         rows = metrics_rows(folder / "metrics.jsonl")
@@ -287,7 +313,7 @@ class Runs:
                                      ppo=dataclasses.replace(flagged.ppo, seed=seed))
         inputs = {k: v for k, v in dataclasses.asdict(config).items()
                   if k not in ("out", "resume")}
-        folder = self.folder(f"ppo_seed{seed}", {"config": inputs})
+        folder = self.folder(f"ppo_seed{seed}", {"config": inputs}, training=True)
         self.trainings.add(folder)
         if (folder / "policy").is_dir():
             return folder
