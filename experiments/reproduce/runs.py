@@ -107,6 +107,17 @@ def _hash(value) -> str:
     return hashlib.sha1(json.dumps(value, sort_keys=True).encode()).hexdigest()[:10]
 
 
+def study_key(study: Study, text: str) -> str:
+    """Hash of a study's resolved TOML `text` with each input file's absolute path replaced by
+    a hash of the file's content, so that a run folder's name (and a committed checkpoint)
+    does not depend on where the checkout and the case files lie."""
+    grid = study.definition.grid
+    for path in sorted({*grid.raw, *filter(None, (grid.dyr, grid.task_config,
+                                                  grid.sim_config))}, key=len, reverse=True):
+        text = text.replace(path, hashlib.sha1(Path(path).read_bytes()).hexdigest())
+    return _hash(text)
+
+
 # Lines that every resolved study TOML gained with a new setting at its default (the study
 # unchanged): runs made before a line came keep the names that the text without it gives.
 ADDED_AT_DEFAULT = ("shed_limit = 1.0\n",)  # [env] shed_limit (078c57a), 1.0: no limit
@@ -126,17 +137,6 @@ def study_keys(study: Study, text: str) -> tuple[str, ...]:
 def _holds_a_run(folder: Path) -> bool:
     """Whether a run folder holds more than its inputs.json."""
     return folder.is_dir() and any(f.name != "inputs.json" for f in folder.iterdir())
-
-
-def study_key(study: Study, text: str) -> str:
-    """Hash of a study's resolved TOML `text` with each input file's absolute path replaced by
-    a hash of the file's content, so that a run folder's name (and a committed checkpoint)
-    does not depend on where the checkout and the case files lie."""
-    grid = study.definition.grid
-    for path in sorted({*grid.raw, *filter(None, (grid.dyr, grid.task_config,
-                                                  grid.sim_config))}, key=len, reverse=True):
-        text = text.replace(path, hashlib.sha1(Path(path).read_bytes()).hexdigest())
-    return _hash(text)
 
 
 class Runs:
