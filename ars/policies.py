@@ -14,6 +14,7 @@ import dataclasses
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.flatten_util import ravel_pytree
 
 KINDS = ("linear", "fnn", "lstm")
@@ -82,9 +83,12 @@ class Policy:
     def __init__(self, spec: PolicySpec):
         self.spec = spec
         self.network = _Network(spec)
-        params = self.network.init(jax.random.PRNGKey(0), jnp.zeros(spec.obs_size),
-                                   self.initial_carry())
-        flat, self._unravel = ravel_pytree(params)
+        # the network's parameter shapes alone (θ starts at 0, not at the initialiser's draw):
+        # traced, not run (run eagerly, each operation of the draw was compiled on its own)
+        shapes = jax.eval_shape(self.network.init, jax.random.PRNGKey(0),
+                                jnp.zeros(spec.obs_size), self.initial_carry())
+        flat, self._unravel = ravel_pytree(jax.tree.map(
+            lambda s: np.zeros(s.shape, s.dtype), shapes))
         self.size = int(flat.shape[0])
 
     def initial_carry(self):

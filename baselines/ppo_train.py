@@ -141,7 +141,8 @@ def train_ppo(config: PPOTrainConfig, study: Study) -> PPOTrainResult:
     adapter, params = gymnax_env(study, config.task_set, ppo.normalize_actions, env)
     algo = make_ppo(adapter, params, ppo)
     info = {**run_info(study, env.config, config.task_set), "config": dataclasses.asdict(ppo)}
-    state, log = host_state(algo.init_state(jax.random.PRNGKey(ppo.seed))), []
+    # compiled: run eagerly, each operation of the networks' and the env's start compiles alone
+    state, log = host_state(jax.jit(algo.init_state)(jax.random.PRNGKey(ppo.seed))), []
     if config.resume:
         restored = checkpoint.restore_latest(mgr, packed(state))
         if restored is None:

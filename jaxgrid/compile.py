@@ -667,33 +667,48 @@ def _check_initial_state(model: GridModel, tolerance: float, notes: list[str]) -
     Load models' flags must also stay put over one 1 ms step at the power-flow voltages.
     """
     with jax.enable_x64(True):
-        x0 = model.initial
-        fault = network.fault_view(model.network, 0, 1.0)
-        rates, v, _ = derivatives(model, x0, fault, 0.0, INIT_SWEEPS)
-        problems = []
-        for family, drift, states in zip(FAMILIES, rates, x0.integrated()):
-            for g, dx, x in zip(getattr(model, family), drift, states):
-                for name, rate in dx.items():
-                    rate = np.abs(np.asarray(rate))
-                    for u in np.flatnonzero(rate > tolerance):
-                        problems.append(f"{g.labels[u]}: d{name}/dt = {rate[u]:.3g} at t = 0")
-                for name, bad in g.model.init_violations(g.params, x).items():
-                    for u in np.flatnonzero(np.asarray(bad)):
-                        value = f" = {float(x[name][u]):.4g}" if name in x else ""
-                        problems.append(f"{g.labels[u]}: initial {name}{value} is outside its "
-                                        "limits")
-        stepped = update_loads(model, x0.replace(v=v), x0.v, 1e-3)
-        for g, before, after in zip(model.loads, x0.load_flags, stepped.load_flags):
-            for name in set(before) - set(g.model.relaxing):
-                change = np.abs(np.asarray(after[name]) - np.asarray(before[name]))
-                for u in np.flatnonzero(change > tolerance):
-                    problems.append(f"{g.labels[u]}: {name} moves by {change[u]:.3g} in the "
-                                    "first 1 ms")
+        rates, violations, stepped = jax.device_get(_rest_check(model))
+    x0 = model.initial
+    problems = []
+    for family, drift, bad_by_group, states in zip(FAMILIES, rates, violations,
+                                                   x0.integrated()):
+        for g, dx, bad_by_name, x in zip(getattr(model, family), drift, bad_by_group, states):
+            for name, rate in dx.items():
+                rate = np.abs(rate)
+                for u in np.flatnonzero(rate > tolerance):
+                    problems.append(f"{g.labels[u]}: d{name}/dt = {rate[u]:.3g} at t = 0")
+            for name, bad in bad_by_name.items():
+                for u in np.flatnonzero(bad):
+                    value = f" = {float(x[name][u]):.4g}" if name in x else ""
+                    problems.append(f"{g.labels[u]}: initial {name}{value} is outside its limits")
+    for g, before, after in zip(model.loads, x0.load_flags, stepped):
+        for name in set(before) - set(g.model.relaxing):
+            change = np.abs(after[name] - np.asarray(before[name]))
+            for u in np.flatnonzero(change > tolerance):
+                problems.append(f"{g.labels[u]}: {name} moves by {change[u]:.3g} in the "
+                                "first 1 ms")
     if problems:
         message = (f"{len(problems)} device variable(s) not at rest at t = 0: "
                    + "; ".join(problems[:20]) + ("; ..." if len(problems) > 20 else ""))
         warnings.warn(message, InitWarning, stacklevel=3)
         notes.extend(problems)
+
+
+@jax.jit
+def _rest_check(model: GridModel):
+    """`_check_initial_state`'s numbers, one compiled program (evaluated eagerly, its
+    operations were each compiled on their own: about a hundred small XLA compiles per
+    model): the devices' rates at the initial state (per family, group: {state: (n,)}), their
+    initial values outside limits (per family, group: {state: (n,) bool}) and the load
+    models' flags after one 1-ms step at the power-flow voltages (per load group)."""
+    x0 = model.initial
+    fault = network.fault_view(model.network, 0, 1.0)
+    rates, v, _ = derivatives(model, x0, fault, 0.0, INIT_SWEEPS)
+    violations = [[g.model.init_violations(g.params, x)
+                   for g, x in zip(getattr(model, family), states)]
+                  for family, states in zip(FAMILIES, x0.integrated())]
+    stepped = update_loads(model, x0.replace(v=v), x0.v, 1e-3)
+    return rates, violations, stepped.load_flags
 
 
 def _jnp(params: dict) -> dict:
