@@ -58,7 +58,7 @@ from jaxgrid.vecmath import power
 
 SLIP_MIN = 1e-7             # smallest slip of the initialisation bracket (spec §5)
 SLIP_GRID = 700             # log-spaced slips in [SLIP_MIN, 1] scanned for breakdown
-BISECTIONS = 100            # halvings of the slip bracket (below float64 resolution)
+BISECTIONS = 100            # most halvings of the slip bracket (it stops at float64 resolution)
 GOLDEN_STEPS = 60           # golden-section steps refining the breakdown slip
 SAT_BISECTIONS = 64         # halvings of the Se(|E''|) bracket in the steady state
 W_TORQUE_MIN = 1e-3         # p.u.: speed floor inside ω^D and ω^E of the load torque
@@ -504,7 +504,10 @@ def solve_slip(c: dict, vmag: np.ndarray, target: np.ndarray):
     for _ in range(BISECTIONS):
         mid = 0.5 * (lo + hi)
         below = _torque_and_power(c, mid, vmag)[1] < target
-        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        halved = np.where(below, mid, lo), np.where(below, hi, mid)
+        if np.array_equal(halved[0], lo) and np.array_equal(halved[1], hi):
+            break  # a fixed point (brackets at float resolution): the rest would repeat it
+        lo, hi = halved
     for k in np.flatnonzero(~ok):
         problem[k] = (f"{problem[k]} (P/Sm = {target[k]:.4g}, at breakdown "
                       f"{p_break[k]:.4g}, no-load {p_min[k]:.3g})")
