@@ -555,6 +555,10 @@ def test_feeder_shedding_scales_the_substation_current(tmp_path, system):
     # a trip pickup takes no sentinel: "trip below 999 p.u." would always trip
     (dict(vtr1a=999.0), r"one_bus.dyr:2: .*CON\(48\) VTR1A = 999 p.u.: must lie in "
                         r"\[0.0, 2.0\]"),
+    # a motor loaded past its breakdown power: named among the three solved together
+    (dict(lfmb=5.0), r"one_bus.dyr:2: CMLDBLU2 at bus 2 id '1': motor B cannot carry its load "
+                     r"at V_L = 0.98\d* p.u.: P/Sm exceeds the power at breakdown torque "
+                     r"\(P/Sm = 5,"),
 ])
 def test_bad_data_names_file_line_con_and_value(tmp_path, changes, message):
     raw, dyr = write_system(tmp_path, record(cons_with(**changes)))
