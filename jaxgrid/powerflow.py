@@ -3,11 +3,14 @@
 The unknowns are every bus's angle and magnitude (2 n_bus). Each bus contributes
 a P row and a Q row; a row whose quantity is not specified is replaced by the
 set-point equation (slack: `va = va_set`; PV and slack: `vm = vm_set`;
-isolated buses are pinned), so the Jacobian has one static shape. PV-to-PQ
-switching on reactive limits then changes only boolean masks (data), and the
-whole Newton loop (`lax.while_loop`, dense LU solve) is compiled once per case
-size. Jacobian: the analytic polar derivatives of S = V conj(Y V) (as in
-MATPOWER's dSbus_dV), plus the voltage dependence of ZIP loads.
+isolated buses are pinned), so the Jacobian has one static sparsity pattern (the
+admittance matrix's nonzeros and diagonal, `jacobian_pattern`). PV-to-PQ switching
+on reactive limits then changes only boolean masks (data), and the residual with the
+Jacobian's values is one jitted JAX program per case size. Jacobian: the analytic
+polar derivatives of S = V conj(Y V) (as in MATPOWER's dSbus_dV), plus the voltage
+dependence of ZIP loads. Each Newton step is a sparse LU solve on the host (SciPy's
+SuperLU): the ACTIVSg2000 power flow took 9.5-10.5 s with a dense LU of its 4 000 × 4 000
+Jacobian (docs/performance.md).
 
 Conventions (see `jaxgrid.case`): p.u. on the system base, angles in radians.
 Loads are P + jQ = S_power + S_current |V| + S_impedance |V|^2.
@@ -17,11 +20,14 @@ Command line: `python -m experiments.powerflow`.
 from __future__ import annotations
 
 import dataclasses
-from functools import partial
+import warnings
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
 
 from jaxgrid.case import ISOLATED, PQ, PV, SLACK, Case, build_case, to_rows
 
@@ -150,61 +156,108 @@ def _bus_sum(case: Case, values: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- #
-# Newton iteration (JAX)
+# Newton iteration (JAX equations, SciPy sparse LU)
 # --------------------------------------------------------------------------- #
 
-def _residual_and_jacobian(va, vm, ybus, s_gen, s_load, p_row, q_row, va_set, vm_set):
-    """Stacked residual (2n,) and Jacobian (2n, 2n) of the masked power-flow equations."""
+class JacobianPattern(NamedTuple):
+    """The sparsity of the power-flow Jacobian (host, built once per solve): the admittance
+    matrix's nonzeros and its diagonal, E entries in row-major order, and the CSR structure of
+    the (2 n_bus, 2 n_bus) Jacobian whose P row r and Q row n + r hold, for each entry (r, c),
+    the columns c (angle) and n + c (magnitude).
+
+    Attributes:
+      rows, cols: (E,) int, the entries' buses.  y: (E,) complex128, Y[rows, cols], p.u.
+      order: (4E,) int, CSR position -> index into the stacked entry values [dP/dva, dP/dvm,
+        dQ/dva, dQ/dvm] (each (E,)).  indices: (4E,) int32 columns.  indptr: (2 n_bus + 1,)
+        int32 row starts.
+    """
+
+    rows: np.ndarray
+    cols: np.ndarray
+    y: np.ndarray
+    order: np.ndarray
+    indices: np.ndarray
+    indptr: np.ndarray
+
+
+def jacobian_pattern(ybus: np.ndarray) -> JacobianPattern:
+    """The `JacobianPattern` of a dense admittance matrix (n, n)."""
+    n = ybus.shape[0]
+    nonzero = ybus != 0
+    nonzero[np.diag_indices(n)] = True  # the set-point rows' identity entries
+    rows, cols = np.nonzero(nonzero)
+    count = rows.size
+    per_row = np.bincount(rows, minlength=n)
+    starts = np.concatenate([[0], np.cumsum(per_row)])
+    entry = np.arange(count)
+    angle = starts[rows] + entry  # row r's angle columns, then its magnitude columns
+    magnitude = angle + per_row[rows]
+    order, indices = np.empty(4 * count, int), np.empty(4 * count, np.int32)
+    for offset, position, block, column in ((0, angle, 0, cols), (0, magnitude, 1, n + cols),
+                                            (2 * count, angle, 2, cols),
+                                            (2 * count, magnitude, 3, n + cols)):
+        order[offset + position] = block * count + entry
+        indices[offset + position] = column
+    indptr = np.concatenate([2 * starts[:-1], 2 * count + 2 * starts]).astype(np.int32)
+    return JacobianPattern(rows, cols, ybus[rows, cols], order, indices, indptr)
+
+
+def _residual_and_jacobian(va, vm, pattern, s_gen, s_load, p_row, q_row, va_set, vm_set):
+    """Stacked residual (2n,) and the Jacobian's CSR values (4E,) of the masked power-flow
+    equations, on `pattern` (a `JacobianPattern` of jnp arrays)."""
     s_power, s_current, s_impedance = s_load
+    rows, cols, y = pattern.rows, pattern.cols, pattern.y
+    n = vm.shape[0]
     v = vm * jnp.exp(1j * va)
-    i_bus = ybus @ v
+    i_bus = jax.ops.segment_sum(y * v[cols], rows, num_segments=n)
     s_bus = v * jnp.conj(i_bus)
     mismatch = s_bus - s_gen + s_power + s_current * vm + s_impedance * vm ** 2
     unit = v / vm
-    ds_dva = 1j * v[:, None] * jnp.conj(jnp.diag(i_bus) - ybus * v[None, :])
-    ds_dvm = (v[:, None] * jnp.conj(ybus * unit[None, :])
-              + jnp.diag(jnp.conj(i_bus) * unit + s_current + 2 * s_impedance * vm))
-    n = vm.shape[0]
-    eye, zero = jnp.eye(n), jnp.zeros((n, n))
-    p_jac = jnp.where(p_row[:, None], jnp.concatenate([ds_dva.real, ds_dvm.real], 1),
-                      jnp.concatenate([eye, zero], 1))
-    q_jac = jnp.where(q_row[:, None], jnp.concatenate([ds_dva.imag, ds_dvm.imag], 1),
-                      jnp.concatenate([zero, eye], 1))
+    diagonal = rows == cols
+    ds_dva = 1j * v[rows] * jnp.conj(jnp.where(diagonal, i_bus[rows], 0.0) - y * v[cols])
+    ds_dvm = v[rows] * jnp.conj(y * unit[cols]) + jnp.where(
+        diagonal, (jnp.conj(i_bus) * unit + s_current + 2 * s_impedance * vm)[rows], 0.0)
+    one = diagonal.astype(vm.dtype)
+    p, q = p_row[rows], q_row[rows]
+    values = jnp.concatenate([jnp.where(p, ds_dva.real, one), jnp.where(p, ds_dvm.real, 0.0),
+                              jnp.where(q, ds_dva.imag, 0.0), jnp.where(q, ds_dvm.imag, one)])
     residual = jnp.concatenate([jnp.where(p_row, mismatch.real, va - va_set),
                                 jnp.where(q_row, mismatch.imag, vm - vm_set)])
-    return residual, jnp.concatenate([p_jac, q_jac], 0)
+    return residual, values[pattern.order]
 
 
-@partial(jax.jit, static_argnames=("max_iter",))
-def newton(va, vm, ybus, s_gen, s_load, p_row, q_row, va_set, vm_set, tol, max_iter):
+_evaluate = jax.jit(_residual_and_jacobian)
+
+
+def newton(va, vm, pattern, s_gen, s_load, p_row, q_row, va_set, vm_set, tol, max_iter):
     """Newton-Raphson until max |residual| < tol, max_iter, or a non-finite step.
 
-    Args: va, vm (n,) start point (rad, p.u.); ybus (n, n); s_gen (n,) specified
-    generation; s_load (3 x (n,)) ZIP load; p_row, q_row (n,) bool, True where
-    the P / Q balance is enforced; va_set, vm_set (n,) set points elsewhere.
-    Returns (va, vm, iterations, residual (2n,)) of the last finite iterate.
+    The residual and the Jacobian's values are one jitted JAX program (float64, under the
+    caller's `jax.enable_x64`); each step is a sparse LU solve on the host
+    (`scipy.sparse.linalg.spsolve`, SuperLU: the sparse factors of a grid's Jacobian, not a
+    dense LU's n³ work).
+    Args: va, vm (n,) start point (rad, p.u.); pattern: the admittance matrix's
+    `JacobianPattern`; s_gen (n,) specified generation; s_load (3 x (n,)) ZIP load; p_row,
+    q_row (n,) bool, True where the P / Q balance is enforced; va_set, vm_set (n,) set
+    points elsewhere (NumPy arrays). Returns (va, vm, iterations, residual (2n,)) of the last
+    finite iterate, NumPy; iterations is max_iter after a non-finite step.
     """
-    args = (ybus, s_gen, s_load, p_row, q_row, va_set, vm_set)
-
-    def cond(carry):
-        _, _, it, residual, _ = carry
-        return (jnp.max(jnp.abs(residual)) > tol) & (it < max_iter)
-
-    def body(carry):
-        va, vm, it, residual, jac = carry
-        step = jnp.linalg.solve(jac, -residual)
-        n = va.shape[0]
+    on_device = JacobianPattern(*map(jnp.asarray, pattern))
+    args = [on_device] + [jax.tree.map(jnp.asarray, a)
+                          for a in (s_gen, s_load, p_row, q_row, va_set, vm_set)]
+    residual, jac = map(np.asarray, _evaluate(va, vm, *args))
+    n, it = va.shape[0], 0
+    while np.max(np.abs(residual)) > tol and it < max_iter:
+        matrix = scipy.sparse.csr_matrix((jac, pattern.indices, pattern.indptr),
+                                         shape=(2 * n, 2 * n))
+        with warnings.catch_warnings():  # a singular Jacobian: nan steps, stopped below
+            warnings.simplefilter("ignore", scipy.sparse.linalg.MatrixRankWarning)
+            step = scipy.sparse.linalg.spsolve(matrix, -residual)
         va_new, vm_new = va + step[:n], vm + step[n:]
-        res_new, jac_new = _residual_and_jacobian(va_new, vm_new, *args)
-        finite = jnp.all(jnp.isfinite(res_new)) & jnp.all(vm_new > 0)
-        # A non-finite step ends the loop (it = max_iter) and keeps the last good iterate.
-        keep = lambda new, old: jnp.where(finite, new, old)  # noqa: E731
-        return (keep(va_new, va), keep(vm_new, vm), keep(it + 1, max_iter),
-                keep(res_new, residual), keep(jac_new, jac))
-
-    residual, jac = _residual_and_jacobian(va, vm, *args)
-    va, vm, it, residual, _ = jax.lax.while_loop(
-        cond, body, (va, vm, jnp.asarray(0), residual, jac))
+        res_new, jac_new = map(np.asarray, _evaluate(va_new, vm_new, *args))
+        if not (np.all(np.isfinite(res_new)) and np.all(vm_new > 0)):
+            return va, vm, max_iter, residual  # the last good iterate
+        va, vm, residual, jac, it = va_new, vm_new, res_new, jac_new, it + 1
     return va, vm, it, residual
 
 
@@ -280,16 +333,12 @@ def solve(case: Case, options: PowerFlowOptions = PowerFlowOptions()) -> PowerFl
     iterations = 0
     ybus_host = admittance_matrix(case)
     with jax.enable_x64(True):
-        ybus = jnp.asarray(ybus_host)
-        s_load_j = tuple(jnp.asarray(s) for s in s_load)
+        pattern = jacobian_pattern(ybus_host)
         for _ in range(options.max_switch_rounds):
             p_row = (kind == PQ) | (kind == PV)
             q_row = kind == PQ
-            va, vm, it, residual = newton(
-                jnp.asarray(va0), jnp.asarray(vm0), ybus, jnp.asarray(s_gen), s_load_j,
-                jnp.asarray(p_row), jnp.asarray(q_row), jnp.asarray(va_set),
-                jnp.asarray(vm_set), options.tol, options.max_iter)
-            va, vm, residual = np.asarray(va), np.asarray(vm), np.asarray(residual)
+            va, vm, it, residual = newton(va0, vm0, pattern, s_gen, s_load, p_row, q_row,
+                                          va_set, vm_set, options.tol, options.max_iter)
             iterations += int(it)
             _raise_if_failed(case, residual, int(it), options)
             v = vm * np.exp(1j * va)

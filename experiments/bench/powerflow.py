@@ -4,7 +4,8 @@
 
 Without --raw it times the built-in cases and, when ../shared/cases is beside
 the repository, the PNNL 2000-bus ACTIVSg2000 file. The first solve includes
-JIT compilation of the Newton loop; the next ones reuse it (same bus count).
+JIT compilation of the residual and Jacobian program; the next ones reuse it (same bus
+count); each Newton step is a SciPy sparse LU solve.
 """
 from __future__ import annotations
 
