@@ -1,0 +1,34 @@
+"""The commands' persistent compilation cache (`experiments.XLA_CACHE`): on by default under
+the home folder, a folder the user set kept, off with JAXGRID_XLA_CACHE=0 and in the
+benchmarks and the commands they start. Checked in fresh processes (JAX reads the setting
+when it is imported; these import no JAX)."""
+import json
+import os
+import subprocess
+import sys
+
+from conftest import REPO
+
+SHOW = ("import json, os; import experiments; first = dict(os.environ); "
+        "import experiments.bench; print(json.dumps([first.get(k) for k in KEYS] + "
+        "[os.environ.get(k) for k in KEYS]))")
+KEYS = ("JAX_COMPILATION_CACHE_DIR", "JAX_COMPILATION_CACHE_MAX_SIZE", "JAXGRID_XLA_CACHE")
+
+
+def _settings(tmp_path, **env):
+    """(after `import experiments`, after `import experiments.bench`): the three variables."""
+    base = {k: v for k, v in os.environ.items() if k not in KEYS}
+    out = subprocess.run([sys.executable, "-c", f"KEYS = {KEYS!r}; {SHOW}"], cwd=REPO,
+                         env={**base, "HOME": str(tmp_path), "PYTHONPATH": str(REPO), **env},
+                         capture_output=True, text=True, check=True).stdout
+    values = json.loads(out)
+    return tuple(values[:3]), tuple(values[3:])
+
+
+def test_commands_cache_compiles_under_home_and_benchmarks_do_not(tmp_path):
+    command, bench = _settings(tmp_path)
+    assert command == (str(tmp_path / ".cache" / "jaxgrid" / "xla"), str(2 * 1024 ** 3), None)
+    assert bench == (None, str(2 * 1024 ** 3), "0"), "a benchmark and what it starts compile"
+    mine = str(tmp_path / "mine")
+    assert _settings(tmp_path, JAX_COMPILATION_CACHE_DIR=mine)[0][0] == mine, "the user's kept"
+    assert _settings(tmp_path, JAXGRID_XLA_CACHE="0")[0] == (None, None, "0")
