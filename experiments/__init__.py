@@ -4,8 +4,9 @@
 Every command keeps XLA's compiled programs in a persistent cache, `XLA_CACHE`
 (~/.cache/jaxgrid/xla, at most `XLA_CACHE_BYTES`, the least recently used evicted): a second
 training, resume or evaluation of the same study and settings loads its large programs
-instead of compiling them (the PNNL 39-bus test-set evaluation of the committed policy: 14-16 s
-cold, 8 s warm, 2-core machine). JAX_COMPILATION_CACHE_DIR chooses another folder;
+instead of compiling them (the PNNL 39-bus test-set evaluation of the committed policy: 15.9 s
+cold, 9.4 s warm, 2-core machine; docs/performance.md). JAX_COMPILATION_CACHE_DIR chooses
+another folder;
 JAXGRID_XLA_CACHE=0 turns the cache off. The benchmarks do not use it (they time compiles),
 nor does a process that imported JAX before this package (JAX reads the setting on import).
 """

@@ -32,3 +32,15 @@ def test_commands_cache_compiles_under_home_and_benchmarks_do_not(tmp_path):
     mine = str(tmp_path / "mine")
     assert _settings(tmp_path, JAX_COMPILATION_CACHE_DIR=mine)[0][0] == mine, "the user's kept"
     assert _settings(tmp_path, JAXGRID_XLA_CACHE="0")[0] == (None, None, "0")
+
+
+def test_a_command_s_compile_lands_in_the_cache(tmp_path):
+    """A program compiled after `import experiments` is written to the cache folder, size
+    limit and all (JAX's limited cache needs the `filelock` package; without it JAX turns
+    the cache off without a word)."""
+    base = {k: v for k, v in os.environ.items() if k not in KEYS}
+    subprocess.run([sys.executable, "-c", "import experiments, jax; "
+                    "jax.jit(lambda x: x + 1)(1.0).block_until_ready()"], cwd=REPO,
+                   env={**base, "HOME": str(tmp_path), "PYTHONPATH": str(REPO),
+                        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0"}, check=True)
+    assert list((tmp_path / ".cache" / "jaxgrid" / "xla").glob("jit_*-cache"))
