@@ -1,7 +1,7 @@
 """The commands' persistent compilation cache (`experiments.XLA_CACHE`): on by default under
-the home folder, a folder the user set kept, off with JAXGRID_XLA_CACHE=0 and in the
-benchmarks and the commands they start. Checked in fresh processes (JAX reads the setting
-when it is imported; these import no JAX)."""
+the home folder with a size limit, a folder the user set kept as JAX's settings have it, off
+with JAXGRID_XLA_CACHE=0 and in the benchmarks and the commands they start; a compile lands
+in it. Checked in fresh processes (JAX reads the settings when it is imported)."""
 import json
 import os
 import subprocess
@@ -30,7 +30,9 @@ def test_commands_cache_compiles_under_home_and_benchmarks_do_not(tmp_path):
     assert command == (str(tmp_path / ".cache" / "jaxgrid" / "xla"), str(2 * 1024 ** 3), None)
     assert bench == (None, str(2 * 1024 ** 3), "0"), "a benchmark and what it starts compile"
     mine = str(tmp_path / "mine")
-    assert _settings(tmp_path, JAX_COMPILATION_CACHE_DIR=mine)[0][0] == mine, "the user's kept"
+    assert _settings(tmp_path, JAX_COMPILATION_CACHE_DIR=mine)[0] == (mine, None, None), \
+        "the user's folder kept, no size limit added (JAX's eviction fails on entries written "\
+        "without one)"
     assert _settings(tmp_path, JAXGRID_XLA_CACHE="0")[0] == (None, None, "0")
 
 
