@@ -3,13 +3,13 @@
 
 Every command keeps XLA's compiled programs in a persistent cache, `XLA_CACHE`
 (~/.cache/jaxgrid/xla, at most `XLA_CACHE_BYTES`, the least recently used evicted): a second
-training, resume or evaluation of the same study and settings loads its large programs
-instead of compiling them (the PNNL 39-bus test-set evaluation of the committed policy: 15.9 s
-cold, 9.4 s warm, 2-core machine; docs/performance.md). JAX_COMPILATION_CACHE_DIR chooses
-another folder (JAX's settings as they are, no size limit unless
-JAX_COMPILATION_CACHE_MAX_SIZE says so); JAXGRID_XLA_CACHE=0 turns the cache off. The benchmarks do not use it (they
-time compiles), nor does a process that imported JAX before this package (JAX reads the
-setting on import).
+training, resume or evaluation of the same study and settings loads its large programs instead
+of compiling them (the PNNL 39-bus test-set evaluation of the committed policy: 15.9 s cold,
+9.4 s warm, 2-core machine; docs/performance.md). JAX_COMPILATION_CACHE_DIR chooses another
+folder (JAX's settings as they are, no size limit unless JAX_COMPILATION_CACHE_MAX_SIZE says
+so); JAXGRID_XLA_CACHE=0 turns the cache off. The benchmarks do not use it (they time
+compiles), nor does a process that imported JAX before this package (JAX reads the setting on
+import).
 """
 import os
 from pathlib import Path
